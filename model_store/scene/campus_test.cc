@@ -1,0 +1,68 @@
+#include "model_store/scene/campus.h"
+
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+#include "model_store/geometry/raycast.h"
+
+namespace ave::scene {
+namespace {
+
+TEST(Campus, StaticMeshIsConsistent) {
+  const SyntheticCampus campus = BuiltinCampus();
+  const TriangleMesh mesh = BuildStaticMesh(campus, 4.0);
+  ASSERT_EQ(mesh.positions.size(), mesh.normals.size());
+  ASSERT_EQ(mesh.positions.size(), mesh.colors.size());
+  ASSERT_EQ(mesh.indices.size() % 3, 0u);
+  ASSERT_EQ(mesh.triangle_material.size(), mesh.TriangleCount());
+  ASSERT_EQ(mesh.triangle_object.size(), mesh.TriangleCount());
+  for (uint32_t i : mesh.indices) ASSERT_LT(i, mesh.positions.size());
+  for (const auto& n : mesh.normals) ASSERT_NEAR(n.norm(), 1.0f, 1e-4f);
+  EXPECT_EQ(mesh.origin, campus.origin);
+}
+
+// A vertical ray onto a building hits its roof at BuildingTop; onto open ground, the terrain.
+TEST(Campus, RaysHitRoofsAndTerrainWhereExpected) {
+  const SyntheticCampus campus = BuiltinCampus();
+  const TriangleMesh mesh = BuildStaticMesh(campus, 2.0);
+  const BoxBuilding& b = campus.buildings[0];
+  const auto roof = RaycastMesh(mesh, {b.center_m.x(), b.center_m.y(), 200}, {0, 0, -1});
+  ASSERT_TRUE(roof.has_value());
+  EXPECT_NEAR(200 - roof->distance_m, campus.BuildingTop(b), 1e-3);
+  EXPECT_EQ(mesh.triangle_material[roof->triangle], SurfaceMaterial::kRoof);
+  // Open ground: the 2 m grid is a linear interpolation of the analytic terrain, within 2 cm.
+  const auto ground = RaycastMesh(mesh, {-95, 95.3, 200}, {0, 0, -1});
+  ASSERT_TRUE(ground.has_value());
+  EXPECT_NEAR(200 - ground->distance_m, campus.TerrainHeight(-95, 95.3), 0.02);
+}
+
+TEST(Campus, MoversFollowTheirLoopsAtTheirSpeed) {
+  const SyntheticCampus campus = BuiltinCampus();
+  const Mover& m = campus.movers[0];
+  const MoverState a = MoverAt(campus, m, 0.0), b = MoverAt(campus, m, 1.0);
+  EXPECT_NEAR((b.position_m.head<2>() - a.position_m.head<2>()).norm(), m.speed_mps, 1e-9);
+  EXPECT_NEAR(a.position_m.z(), campus.TerrainHeight(a.position_m.x(), a.position_m.y()), 1e-12);
+  // Negative and very large times stay finite and on the loop.
+  for (double t : {-1e3, 1e7}) {
+    const MoverState s = MoverAt(campus, m, t);
+    EXPECT_TRUE(s.position_m.allFinite());
+    EXPECT_NEAR(s.position_m.x(), -6, 1e-6);
+  }
+}
+
+TEST(Campus, EveryCameraLooksAtGroundInsideTheSite) {
+  const SyntheticCampus campus = BuiltinCampus();
+  const TriangleMesh mesh = BuildStaticMesh(campus, 4.0);
+  ASSERT_EQ(campus.cameras.size(), 3u);
+  for (const auto& cam : campus.cameras) {
+    EXPECT_EQ(cam.intrinsics.Check(), "") << cam.id;
+    const Eigen::Vector3d axis = cam.world_from_camera.rotation * Eigen::Vector3d::UnitZ();
+    const auto hit = RaycastMesh(mesh, cam.world_from_camera.translation, axis);
+    ASSERT_TRUE(hit.has_value()) << cam.id;
+    EXPECT_LT(hit->distance_m, 120) << cam.id;
+  }
+}
+
+}  // namespace
+}  // namespace ave::scene
