@@ -1,0 +1,409 @@
+#include "model_store/db/store.h"
+
+#include <sqlite3.h>
+
+#include <cctype>
+#include <chrono>
+#include <cmath>
+#include <mutex>
+#include <utility>
+
+#include "absl/status/status.h"
+#include "model_store/db/mesh_blob.h"
+
+namespace ave::store {
+namespace {
+
+// Schema migrations: entry i takes the file from user_version i to i + 1. Append, never edit.
+const std::vector<const char*>& Migrations() {
+  static const std::vector<const char*> kSteps = {
+      R"sql(
+      CREATE TABLE cameras (
+        id TEXT PRIMARY KEY NOT NULL, name TEXT NOT NULL,
+        width INTEGER NOT NULL, height INTEGER NOT NULL,
+        fx REAL NOT NULL, fy REAL NOT NULL, cx REAL NOT NULL, cy REAL NOT NULL,
+        k1 REAL NOT NULL, k2 REAL NOT NULL, p1 REAL NOT NULL, p2 REAL NOT NULL, k3 REAL NOT NULL,
+        qw REAL NOT NULL, qx REAL NOT NULL, qy REAL NOT NULL, qz REAL NOT NULL,
+        tx REAL NOT NULL, ty REAL NOT NULL, tz REAL NOT NULL,
+        source_url TEXT NOT NULL, enabled INTEGER NOT NULL, updated_at_ns INTEGER NOT NULL);
+      CREATE TABLE static_models (
+        version INTEGER PRIMARY KEY AUTOINCREMENT, name TEXT NOT NULL,
+        created_at_ns INTEGER NOT NULL, mesh BLOB NOT NULL);
+      CREATE TABLE audit (
+        id INTEGER PRIMARY KEY AUTOINCREMENT, at_ns INTEGER NOT NULL,
+        actor TEXT NOT NULL, action TEXT NOT NULL, target TEXT NOT NULL,
+        before_json TEXT NOT NULL, after_json TEXT NOT NULL);
+      CREATE TRIGGER audit_no_update BEFORE UPDATE ON audit
+        BEGIN SELECT RAISE(ABORT, 'audit rows are append-only'); END;
+      CREATE TRIGGER audit_no_delete BEFORE DELETE ON audit
+        BEGIN SELECT RAISE(ABORT, 'audit rows are append-only'); END;
+      )sql",
+  };
+  return kSteps;
+}
+
+int64_t NowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+struct Blob {
+  std::string_view bytes;
+};
+
+// Owns the connection; every failure becomes a Status carrying sqlite3_errmsg and the path.
+class Db {
+ public:
+  static absl::StatusOr<std::unique_ptr<Db>> Open(const std::string& path) {
+    sqlite3* raw = nullptr;
+    const int rc = sqlite3_open_v2(path.c_str(), &raw, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, nullptr);
+    auto db = std::unique_ptr<Db>(new Db(raw, path));  // closes `raw` even when open failed
+    if (rc != SQLITE_OK) {
+      return absl::UnavailableError("model store '" + path + "': cannot open: " +
+                                    (raw ? sqlite3_errmsg(raw) : sqlite3_errstr(rc)));
+    }
+    return db;
+  }
+  ~Db() { sqlite3_close_v2(db_); }  // v2 defers the close if a statement leaked; nothing to report
+
+  sqlite3* get() const { return db_; }
+  const std::string& path() const { return path_; }
+
+  absl::Status Error(std::string_view what) const {
+    const int code = sqlite3_extended_errcode(db_);
+    std::string msg = "model store '" + path_ + "': " + std::string(what) + ": " + sqlite3_errmsg(db_);
+    if (code == SQLITE_CONSTRAINT_PRIMARYKEY || code == SQLITE_CONSTRAINT_UNIQUE) return absl::AlreadyExistsError(msg);
+    if ((code & 0xFF) == SQLITE_BUSY || (code & 0xFF) == SQLITE_LOCKED) return absl::UnavailableError(msg);
+    if ((code & 0xFF) == SQLITE_CORRUPT || (code & 0xFF) == SQLITE_NOTADB) return absl::DataLossError(msg);
+    return absl::InternalError(msg);
+  }
+
+  absl::Status Exec(const char* sql, std::string_view what) {
+    if (sqlite3_exec(db_, sql, nullptr, nullptr, nullptr) != SQLITE_OK) return Error(what);
+    return absl::OkStatus();
+  }
+
+ private:
+  Db(sqlite3* db, std::string path) : db_(db), path_(std::move(path)) {}
+  sqlite3* db_;
+  std::string path_;
+};
+
+// A prepared statement; Bind(...) binds parameters 1..N in order, Step() says whether a row is ready.
+class Stmt {
+ public:
+  static absl::StatusOr<Stmt> Prepare(Db& db, const char* sql) {
+    sqlite3_stmt* s = nullptr;
+    if (sqlite3_prepare_v2(db.get(), sql, -1, &s, nullptr) != SQLITE_OK) {
+      return db.Error(std::string("prepare \"") + sql + "\"");
+    }
+    return Stmt(db, s);
+  }
+  Stmt(Stmt&& o) noexcept : db_(o.db_), s_(std::exchange(o.s_, nullptr)) {}
+  Stmt& operator=(Stmt&&) = delete;
+  ~Stmt() { sqlite3_finalize(s_); }  // returns the last step's error, already reported by Step()
+
+  template <typename... Args>
+  absl::Status Bind(const Args&... args) {
+    int index = 0;
+    absl::Status status;
+    ((status.ok() ? status = BindOne(++index, args) : status), ...);
+    return status;
+  }
+
+  absl::StatusOr<bool> Step() {
+    const int rc = sqlite3_step(s_);
+    if (rc == SQLITE_ROW) return true;
+    if (rc == SQLITE_DONE) return false;
+    return db_->Error(std::string("step \"") + sqlite3_sql(s_) + "\"");
+  }
+  absl::Status Run() {  // a statement expected to return no rows
+    absl::StatusOr<bool> row = Step();
+    if (!row.ok()) return row.status();
+    return absl::OkStatus();
+  }
+
+  double Double(int col) const { return sqlite3_column_double(s_, col); }
+  int64_t Int(int col) const { return sqlite3_column_int64(s_, col); }
+  std::string Text(int col) const {
+    const auto* p = reinterpret_cast<const char*>(sqlite3_column_text(s_, col));
+    return p ? std::string(p, sqlite3_column_bytes(s_, col)) : std::string();
+  }
+  std::string_view BlobAt(int col) const {
+    const void* p = sqlite3_column_blob(s_, col);
+    return p ? std::string_view(static_cast<const char*>(p), sqlite3_column_bytes(s_, col)) : std::string_view();
+  }
+
+ private:
+  Stmt(Db& db, sqlite3_stmt* s) : db_(&db), s_(s) {}
+  absl::Status Check(int rc, int index) {
+    if (rc == SQLITE_OK) return absl::OkStatus();
+    return db_->Error("bind parameter " + std::to_string(index) + " of \"" + sqlite3_sql(s_) + "\"");
+  }
+  absl::Status BindOne(int i, double v) { return Check(sqlite3_bind_double(s_, i, v), i); }
+  absl::Status BindOne(int i, int64_t v) { return Check(sqlite3_bind_int64(s_, i, v), i); }
+  absl::Status BindOne(int i, int v) { return Check(sqlite3_bind_int64(s_, i, v), i); }
+  absl::Status BindOne(int i, bool v) { return Check(sqlite3_bind_int64(s_, i, v ? 1 : 0), i); }
+  absl::Status BindOne(int i, const std::string& v) {
+    return Check(sqlite3_bind_text64(s_, i, v.data(), v.size(), SQLITE_TRANSIENT, SQLITE_UTF8), i);
+  }
+  absl::Status BindOne(int i, const Blob& v) {
+    return Check(sqlite3_bind_blob64(s_, i, v.bytes.data(), v.bytes.size(), SQLITE_TRANSIENT), i);
+  }
+
+  Db* db_;
+  sqlite3_stmt* s_;
+};
+
+// BEGIN IMMEDIATE ... COMMIT; rolls back unless Commit() succeeded.
+class Transaction {
+ public:
+  explicit Transaction(Db& db) : db_(db) {}
+  absl::Status Begin() {
+    absl::Status s = db_.Exec("BEGIN IMMEDIATE", "begin transaction");
+    open_ = s.ok();
+    return s;
+  }
+  absl::Status Commit() {
+    absl::Status s = db_.Exec("COMMIT", "commit");
+    if (s.ok()) open_ = false;
+    return s;
+  }
+  ~Transaction() {
+    if (open_) sqlite3_exec(db_.get(), "ROLLBACK", nullptr, nullptr, nullptr);  // best effort on an error path
+  }
+
+ private:
+  Db& db_;
+  bool open_ = false;
+};
+
+#define AVE_RETURN_IF_ERROR(expr)        \
+  do {                                   \
+    absl::Status _st = (expr);           \
+    if (!_st.ok()) return _st;           \
+  } while (0)
+#define AVE_ASSIGN_OR_RETURN(lhs, expr)         \
+  auto lhs##_or = (expr);                       \
+  if (!lhs##_or.ok()) return lhs##_or.status(); \
+  auto lhs = std::move(*lhs##_or)
+
+absl::StatusOr<int> QueryInt(Db& db, const char* sql) {
+  AVE_ASSIGN_OR_RETURN(stmt, Stmt::Prepare(db, sql));
+  AVE_ASSIGN_OR_RETURN(row, stmt.Step());
+  if (!row) return absl::InternalError("model store '" + db.path() + "': \"" + sql + "\" returned no row");
+  return static_cast<int>(stmt.Int(0));
+}
+
+constexpr char kCameraColumns[] =
+    "id, name, width, height, fx, fy, cx, cy, k1, k2, p1, p2, k3, qw, qx, qy, qz, tx, ty, tz, source_url, enabled, "
+    "updated_at_ns";
+
+CameraRecord ReadCamera(const Stmt& s) {
+  CameraRecord c;
+  c.id = s.Text(0);
+  c.name = s.Text(1);
+  PinholeIntrinsics& k = c.intrinsics;
+  k.width = static_cast<int>(s.Int(2));
+  k.height = static_cast<int>(s.Int(3));
+  k.fx = s.Double(4), k.fy = s.Double(5), k.cx = s.Double(6), k.cy = s.Double(7);
+  for (int i = 0; i < 5; ++i) k.distortion[i] = s.Double(8 + i);
+  // Assigned directly: the Rigid3d constructor would renormalise and perturb the stored bits.
+  c.world_from_camera.rotation = Eigen::Quaterniond(s.Double(13), s.Double(14), s.Double(15), s.Double(16));
+  c.world_from_camera.translation = Eigen::Vector3d(s.Double(17), s.Double(18), s.Double(19));
+  c.source_url = s.Text(20);
+  c.enabled = s.Int(21) != 0;
+  c.updated_at_ns = s.Int(22);
+  return c;
+}
+
+// Binds all columns in kCameraColumns order; the rotation is normalised here.
+absl::Status BindCamera(Stmt& s, const CameraRecord& c, int64_t now_ns) {
+  const PinholeIntrinsics& k = c.intrinsics;
+  const Eigen::Quaterniond q = c.world_from_camera.rotation.normalized();
+  const Eigen::Vector3d& t = c.world_from_camera.translation;
+  const auto& d = k.distortion;
+  return s.Bind(c.id, c.name, k.width, k.height, k.fx, k.fy, k.cx, k.cy, d[0], d[1], d[2], d[3], d[4], q.w(), q.x(),
+                q.y(), q.z(), t.x(), t.y(), t.z(), c.source_url, c.enabled, now_ns);
+}
+
+}  // namespace
+
+std::string ValidateCamera(const CameraRecord& c) {
+  const std::string prefix = "camera '" + c.id + "': ";
+  bool id_ok = !c.id.empty() && c.id.size() <= 64;
+  for (char ch : c.id) {
+    id_ok = id_ok && (std::isalnum(static_cast<unsigned char>(ch)) || ch == '_' || ch == '.' || ch == '-');
+  }
+  if (!id_ok) return prefix + "id must match [A-Za-z0-9_.-]{1,64}";
+  if (c.name.size() > 128) return prefix + "name must be at most 128 characters";
+  if (std::string why = c.intrinsics.Check(); !why.empty()) return prefix + "intrinsics." + why;
+  if (!c.world_from_camera.translation.allFinite()) return prefix + "world_from_camera.translation must be finite";
+  const Eigen::Quaterniond& q = c.world_from_camera.rotation;
+  if (!q.coeffs().allFinite()) return prefix + "world_from_camera.rotation must be finite";
+  if (std::abs(1.0 - q.norm()) > 1e-3)
+    return prefix + "world_from_camera.rotation must be a unit quaternion (|q| = " + std::to_string(q.norm()) + ")";
+  if (c.source_url.size() > 1024) return prefix + "source_url must be at most 1024 characters";
+  return {};
+}
+
+class Store::Impl {
+ public:
+  Impl(std::unique_ptr<Db> db, int version) : db(std::move(db)), schema_version(version) {}
+  std::mutex mu;
+  std::unique_ptr<Db> db;
+  int schema_version;
+};
+
+Store::Store(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Store::~Store() = default;
+int Store::SchemaVersion() const { return impl_->schema_version; }
+int Store::LatestSchemaVersion() { return static_cast<int>(Migrations().size()); }
+const std::string& Store::path() const { return impl_->db->path(); }
+
+absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& path) {
+  AVE_ASSIGN_OR_RETURN(db, Db::Open(path));
+  if (sqlite3_busy_timeout(db->get(), 5000) != SQLITE_OK) return db->Error("set busy timeout");
+  AVE_RETURN_IF_ERROR(db->Exec("PRAGMA foreign_keys = ON", "enable foreign keys"));
+  {
+    AVE_ASSIGN_OR_RETURN(stmt, Stmt::Prepare(*db, "PRAGMA journal_mode = WAL"));
+    AVE_ASSIGN_OR_RETURN(row, stmt.Step());
+    const std::string mode = row ? stmt.Text(0) : "";
+    if (mode != "wal" && !(path == ":memory:" && mode == "memory")) {
+      return absl::FailedPreconditionError("model store '" + path + "': cannot enable WAL journal (mode is '" + mode +
+                                           "')");
+    }
+  }
+  AVE_ASSIGN_OR_RETURN(version, QueryInt(*db, "PRAGMA user_version"));
+  const int latest = LatestSchemaVersion();
+  if (version > latest || version < 0) {
+    return absl::FailedPreconditionError("model store '" + path + "' has schema version " + std::to_string(version) +
+                                         ", newer than the latest this build knows (" + std::to_string(latest) +
+                                         "); refusing to open it (upgrade AVE)");
+  }
+  for (; version < latest; ++version) {
+    const std::string step = "migrate schema " + std::to_string(version) + " -> " + std::to_string(version + 1);
+    Transaction txn(*db);
+    AVE_RETURN_IF_ERROR(txn.Begin());
+    AVE_RETURN_IF_ERROR(db->Exec(Migrations()[version], step));
+    const std::string set_version = "PRAGMA user_version = " + std::to_string(version + 1);
+    AVE_RETURN_IF_ERROR(db->Exec(set_version.c_str(), step));
+    AVE_RETURN_IF_ERROR(txn.Commit());
+  }
+  return std::unique_ptr<Store>(new Store(std::make_unique<Impl>(std::move(db), version)));
+}
+
+absl::Status Store::AddCamera(const CameraRecord& camera) {
+  if (std::string why = ValidateCamera(camera); !why.empty()) return absl::InvalidArgumentError(why);
+  std::lock_guard lock(impl_->mu);
+  AVE_ASSIGN_OR_RETURN(stmt, Stmt::Prepare(*impl_->db, (std::string("INSERT INTO cameras (") + kCameraColumns +
+                                                        ") VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)")
+                                                           .c_str()));
+  AVE_RETURN_IF_ERROR(BindCamera(stmt, camera, NowNs()));
+  absl::Status s = stmt.Run();
+  if (absl::IsAlreadyExists(s)) return absl::AlreadyExistsError("camera '" + camera.id + "' already exists");
+  return s;
+}
+
+absl::Status Store::UpdateCamera(const CameraRecord& camera) {
+  if (std::string why = ValidateCamera(camera); !why.empty()) return absl::InvalidArgumentError(why);
+  std::lock_guard lock(impl_->mu);
+  // Parameter 1 is the id (WHERE ?1), the rest follow kCameraColumns order.
+  AVE_ASSIGN_OR_RETURN(stmt, Stmt::Prepare(*impl_->db,
+                                           "UPDATE cameras SET name=?2, width=?3, height=?4, fx=?5, fy=?6, cx=?7, "
+                                           "cy=?8, k1=?9, k2=?10, p1=?11, p2=?12, k3=?13, qw=?14, qx=?15, qy=?16, "
+                                           "qz=?17, tx=?18, ty=?19, tz=?20, source_url=?21, enabled=?22, "
+                                           "updated_at_ns=?23 WHERE id=?1"));
+  AVE_RETURN_IF_ERROR(BindCamera(stmt, camera, NowNs()));
+  AVE_RETURN_IF_ERROR(stmt.Run());
+  if (sqlite3_changes(impl_->db->get()) == 0) return absl::NotFoundError("camera '" + camera.id + "' not found");
+  return absl::OkStatus();
+}
+
+absl::Status Store::RemoveCamera(const std::string& id) {
+  std::lock_guard lock(impl_->mu);
+  AVE_ASSIGN_OR_RETURN(stmt, Stmt::Prepare(*impl_->db, "DELETE FROM cameras WHERE id = ?"));
+  AVE_RETURN_IF_ERROR(stmt.Bind(id));
+  AVE_RETURN_IF_ERROR(stmt.Run());
+  if (sqlite3_changes(impl_->db->get()) == 0) return absl::NotFoundError("camera '" + id + "' not found");
+  return absl::OkStatus();
+}
+
+absl::StatusOr<CameraRecord> Store::GetCamera(const std::string& id) {
+  std::lock_guard lock(impl_->mu);
+  AVE_ASSIGN_OR_RETURN(
+      stmt, Stmt::Prepare(*impl_->db, (std::string("SELECT ") + kCameraColumns + " FROM cameras WHERE id = ?").c_str()));
+  AVE_RETURN_IF_ERROR(stmt.Bind(id));
+  AVE_ASSIGN_OR_RETURN(row, stmt.Step());
+  if (!row) return absl::NotFoundError("camera '" + id + "' not found");
+  return ReadCamera(stmt);
+}
+
+absl::StatusOr<std::vector<CameraRecord>> Store::ListCameras() {
+  std::lock_guard lock(impl_->mu);
+  AVE_ASSIGN_OR_RETURN(
+      stmt, Stmt::Prepare(*impl_->db, (std::string("SELECT ") + kCameraColumns + " FROM cameras ORDER BY id").c_str()));
+  std::vector<CameraRecord> out;
+  for (;;) {
+    AVE_ASSIGN_OR_RETURN(row, stmt.Step());
+    if (!row) return out;
+    out.push_back(ReadCamera(stmt));
+  }
+}
+
+absl::StatusOr<int64_t> Store::PutStaticModel(const std::string& name, const TriangleMesh& mesh) {
+  AVE_ASSIGN_OR_RETURN(blob, EncodeMesh(mesh, "static model '" + name + "'"));
+  std::lock_guard lock(impl_->mu);
+  AVE_ASSIGN_OR_RETURN(
+      stmt, Stmt::Prepare(*impl_->db, "INSERT INTO static_models (name, created_at_ns, mesh) VALUES (?, ?, ?)"));
+  AVE_RETURN_IF_ERROR(stmt.Bind(name, NowNs(), Blob{blob}));
+  AVE_RETURN_IF_ERROR(stmt.Run());
+  return sqlite3_last_insert_rowid(impl_->db->get());
+}
+
+absl::StatusOr<std::optional<StaticModelRecord>> Store::LatestStaticModel() {
+  std::lock_guard lock(impl_->mu);
+  AVE_ASSIGN_OR_RETURN(stmt, Stmt::Prepare(*impl_->db,
+                                           "SELECT version, name, created_at_ns, mesh FROM static_models "
+                                           "ORDER BY version DESC LIMIT 1"));
+  AVE_ASSIGN_OR_RETURN(row, stmt.Step());
+  if (!row) return std::optional<StaticModelRecord>();
+  StaticModelRecord rec;
+  rec.version = stmt.Int(0);
+  rec.name = stmt.Text(1);
+  rec.created_at_ns = stmt.Int(2);
+  AVE_ASSIGN_OR_RETURN(
+      mesh, DecodeMesh(stmt.BlobAt(3), "model store '" + path() + "': static_models version " + std::to_string(rec.version)));
+  rec.mesh = std::move(mesh);
+  return rec;
+}
+
+absl::StatusOr<int64_t> Store::AppendAudit(const std::string& actor, const std::string& action,
+                                           const std::string& target, const std::string& before_json,
+                                           const std::string& after_json) {
+  std::lock_guard lock(impl_->mu);
+  AVE_ASSIGN_OR_RETURN(stmt, Stmt::Prepare(*impl_->db,
+                                           "INSERT INTO audit (at_ns, actor, action, target, before_json, after_json) "
+                                           "VALUES (?, ?, ?, ?, ?, ?)"));
+  AVE_RETURN_IF_ERROR(stmt.Bind(NowNs(), actor, action, target, before_json, after_json));
+  AVE_RETURN_IF_ERROR(stmt.Run());
+  return sqlite3_last_insert_rowid(impl_->db->get());
+}
+
+absl::StatusOr<std::vector<AuditEntry>> Store::ListAudit(int limit) {
+  if (limit < 0) return absl::InvalidArgumentError("ListAudit: limit must be >= 0");
+  std::lock_guard lock(impl_->mu);
+  AVE_ASSIGN_OR_RETURN(stmt, Stmt::Prepare(*impl_->db,
+                                           "SELECT id, at_ns, actor, action, target, before_json, after_json "
+                                           "FROM audit ORDER BY id DESC LIMIT ?"));
+  AVE_RETURN_IF_ERROR(stmt.Bind(limit));
+  std::vector<AuditEntry> out;
+  for (;;) {
+    AVE_ASSIGN_OR_RETURN(row, stmt.Step());
+    if (!row) return out;
+    out.push_back(AuditEntry{stmt.Int(0), stmt.Int(1), stmt.Text(2), stmt.Text(3), stmt.Text(4), stmt.Text(5),
+                             stmt.Text(6)});
+  }
+}
+
+}  // namespace ave::store
