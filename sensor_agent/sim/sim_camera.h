@@ -1,0 +1,89 @@
+#pragma once
+// The simulated camera of the sensor agent: a deterministic single-threaded CPU rasteriser of the
+// synthetic campus (terrain, buildings, movers at time t) with per-pixel ground truth.
+//
+// Appearance is the "real world", deliberately unlike the viewer model's flat neutral colours:
+// procedural grass, asphalt with lane markings, walls with window grids, coloured roofs and
+// Lambert-shaded movers, all computed from the local-frame position so the texture is stable in
+// the world (features of 0.5-2 m, smooth over a few pixels so JPEG keeps them).
+//
+// Frames: "world" in this file is the campus's local frame (east, north, up; metres), the frame
+// CameraSpec::world_from_camera is given in. Camera frame and pixel convention are OpenCV's (see
+// model_store/geometry/camera.h): integer pixel coordinates are pixel centres. Lens distortion in
+// the intrinsics is ignored (ideal pinhole render).
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "model_store/geometry/camera.h"
+#include "model_store/geometry/rigid3.h"
+#include "model_store/scene/campus.h"
+
+namespace ave::sim {
+
+// Per-pixel object ids (SimImage::object_id):
+//   kSkyId                      the pixel's ray hits nothing;
+//   kGroundId                   terrain, roads included;
+//   kBuildingIdBase + i         SyntheticCampus::buildings[i] (walls and roof), i < 999'000;
+//   kMoverIdBase + Mover::id    any part of that mover (ids below 2^32 - kMoverIdBase).
+inline constexpr uint32_t kSkyId = 0;
+inline constexpr uint32_t kGroundId = 1;
+inline constexpr uint32_t kBuildingIdBase = 1'000;
+inline constexpr uint32_t kMoverIdBase = 1'000'000;
+
+inline bool IsBuildingId(uint32_t id) { return id >= kBuildingIdBase && id < kMoverIdBase; }
+inline bool IsMoverId(uint32_t id) { return id >= kMoverIdBase; }
+
+struct SimImage {
+  int width = 0, height = 0;
+  std::vector<uint8_t> bgr;          // 3 bytes per pixel, top row first: cv::Mat(h, w, CV_8UC3, bgr.data())
+  std::vector<uint32_t> object_id;   // one per pixel, see the id scheme above
+  std::vector<float> depth_m;        // one per pixel: z in the camera frame; +inf where the sky shows
+
+  size_t Index(int u, int v) const { return static_cast<size_t>(v) * width + u; }
+};
+
+struct RendererOptions {
+  // Terrain triangle grid passed to scene::BuildStaticMesh; at 1 m the facets stay within 1 mm of the analytic hills.
+  double terrain_resolution_m = 1.0;
+  // Movers (people, cars) at the render time; off gives the static campus only.
+  bool draw_movers = true;
+  // Unit-less direction towards the sun in the local frame (normalised on use).
+  Eigen::Vector3d sun_direction = Eigen::Vector3d(0.45, -0.35, 0.82);
+  // Near clipping plane in the camera frame; triangles crossing it are clipped, not dropped.
+  double near_m = 0.05;
+
+  // Empty when usable; otherwise names the first bad field.
+  std::string Check() const;
+};
+
+class CampusRenderer {
+ public:
+  using Options = RendererOptions;
+
+  // Precomputes the static triangles and their material data. Throws std::invalid_argument with
+  // Check()'s reason when `options` are unusable (a programmer error).
+  explicit CampusRenderer(const scene::SyntheticCampus& campus, Options options = {});
+  CampusRenderer(const CampusRenderer&) = delete;
+  CampusRenderer& operator=(const CampusRenderer&) = delete;
+  CampusRenderer(CampusRenderer&&) noexcept;
+  CampusRenderer& operator=(CampusRenderer&&) noexcept;
+  ~CampusRenderer();
+
+  // Renders the campus at `t_s` seconds since the scenario start as seen by a camera at
+  // `world_from_camera` (local frame). Invalid intrinsics (PinholeIntrinsics::Check) or a
+  // non-finite pose give an empty image (width = height = 0). Pure: the same inputs give
+  // bit-identical output.
+  SimImage Render(const PinholeIntrinsics& intrinsics, const Rigid3d& world_from_camera, double t_s) const;
+
+  const Options& options() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<const Impl> impl_;
+};
+
+}  // namespace ave::sim
