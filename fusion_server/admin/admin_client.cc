@@ -1,0 +1,68 @@
+#include "fusion_server/admin/admin_client.h"
+
+#include "fusion_server/core/convert.h"
+
+namespace ave {
+
+absl::Status FromGrpc(const grpc::Status& status) {
+  if (status.ok()) return absl::OkStatus();
+  return absl::Status(static_cast<absl::StatusCode>(status.error_code()), status.error_message());
+}
+
+AdminClient::AdminClient(std::shared_ptr<grpc::Channel> channel, std::string admin_token)
+    : stub_(v1::AdminService::NewStub(std::move(channel))), token_(std::move(admin_token)) {}
+
+void AdminClient::Authorize(grpc::ClientContext& context) const {
+  context.AddMetadata("authorization", "Bearer " + token_);
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+}
+
+absl::StatusOr<v1::Camera> AdminClient::AddCamera(const v1::Camera& camera) {
+  grpc::ClientContext context;
+  Authorize(context);
+  v1::AddCameraRequest request;
+  *request.mutable_camera() = camera;
+  v1::Camera response;
+  if (absl::Status s = FromGrpc(stub_->AddCamera(&context, request, &response)); !s.ok()) return s;
+  return response;
+}
+
+absl::StatusOr<v1::Camera> AdminClient::UpdateCamera(const v1::Camera& camera) {
+  grpc::ClientContext context;
+  Authorize(context);
+  v1::UpdateCameraRequest request;
+  *request.mutable_camera() = camera;
+  v1::Camera response;
+  if (absl::Status s = FromGrpc(stub_->UpdateCamera(&context, request, &response)); !s.ok()) return s;
+  return response;
+}
+
+absl::Status AdminClient::RemoveCamera(const std::string& id) {
+  grpc::ClientContext context;
+  Authorize(context);
+  v1::RemoveCameraRequest request;
+  request.set_id(id);
+  v1::RemoveCameraResponse response;
+  return FromGrpc(stub_->RemoveCamera(&context, request, &response));
+}
+
+absl::StatusOr<std::vector<v1::Camera>> AdminClient::ListCameras() {
+  grpc::ClientContext context;
+  Authorize(context);
+  v1::ListCamerasResponse response;
+  if (absl::Status s = FromGrpc(stub_->ListCameras(&context, v1::ListCamerasRequest(), &response)); !s.ok()) return s;
+  return std::vector<v1::Camera>(response.cameras().begin(), response.cameras().end());
+}
+
+v1::Camera CampusCameraRecord(const scene::CameraSpec& spec) {
+  v1::Camera camera;
+  camera.set_id(spec.id);
+  camera.set_name(spec.name);
+  *camera.mutable_intrinsics() = ToProto(spec.intrinsics);
+  *camera.mutable_mounting_pose() = ToProto(spec.world_from_camera);
+  camera.set_source_url("sim:campus#" + spec.id);
+  camera.set_enabled(true);
+  return camera;
+}
+
+}  // namespace ave

@@ -1,0 +1,35 @@
+#pragma once
+// Client side of AdminService, used by ave-admin, the demo and the tests.
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <grpcpp/grpcpp.h>
+
+#include "absl/status/statusor.h"
+#include "ave/v1/ave.grpc.pb.h"
+#include "model_store/scene/campus.h"
+
+namespace ave {
+
+class AdminClient {
+ public:
+  AdminClient(std::shared_ptr<grpc::Channel> channel, std::string admin_token);
+
+  absl::StatusOr<v1::Camera> AddCamera(const v1::Camera& camera);
+  absl::StatusOr<v1::Camera> UpdateCamera(const v1::Camera& camera);
+  absl::Status RemoveCamera(const std::string& id);
+  absl::StatusOr<std::vector<v1::Camera>> ListCameras();
+
+ private:
+  void Authorize(grpc::ClientContext& context) const;
+  std::unique_ptr<v1::AdminService::StubInterface> stub_;
+  std::string token_;
+};
+
+// The wire record of one of the built-in campus cameras, with source "sim:campus#<id>".
+v1::Camera CampusCameraRecord(const scene::CameraSpec& spec);
+
+absl::Status FromGrpc(const grpc::Status& status);
+
+}  // namespace ave

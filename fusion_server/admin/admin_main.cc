@@ -1,0 +1,138 @@
+// ave-admin: manage the camera registry of a running ave-server.
+//   ave-admin list
+//   ave-admin add-camera --id cam9 --name "Gate" --size 1280x720 --fov 70 --position 10,20,15 --look-at 30,40,0
+//   ave-admin update-camera ... (same flags; every field is replaced)
+//   ave-admin remove-camera --id cam9
+//   ave-admin import-campus            (registers the built-in campus cameras, skipping existing ones)
+#include <cstdlib>
+#include <iostream>
+#include <sstream>
+
+#include <CLI/CLI.hpp>
+#include <google/protobuf/util/json_util.h>
+#include <nlohmann/json.hpp>
+
+#include "fusion_server/admin/admin_client.h"
+#include "fusion_server/core/convert.h"
+
+namespace {
+
+bool ParseVec3(const std::string& text, Eigen::Vector3d& out) {
+  std::stringstream ss(text);
+  char c1 = 0, c2 = 0;
+  return static_cast<bool>(ss >> out.x() >> c1 >> out.y() >> c2 >> out.z()) && c1 == ',' && c2 == ',' && ss.eof();
+}
+
+int Fail(const std::string& what) {
+  std::cerr << "ave-admin: " << what << "\n";
+  return 1;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string server = "127.0.0.1:50051";
+  const char* env_token = std::getenv("AVE_ADMIN_TOKEN");
+  std::string token = env_token ? env_token : "";
+  CLI::App app{"ave-admin: manage the cameras of an AVE fusion server"};
+  app.add_option("--server", server, "server host:port")->capture_default_str();
+  app.add_option("--token", token, "admin bearer token (env AVE_ADMIN_TOKEN)");
+  app.require_subcommand(1);
+
+  app.add_subcommand("list", "list registered cameras as JSON");
+  std::string id, name, source, size = "640x480", position, look_at, quaternion;
+  double fov_deg = 60;
+  bool disabled = false;
+  auto add_camera_flags = [&](CLI::App* sub) {
+    sub->add_option("--id", id, "camera id ([A-Za-z0-9_.-], 1..64)")->required();
+    sub->add_option("--name", name, "display name");
+    sub->add_option("--size", size, "image size WIDTHxHEIGHT")->capture_default_str();
+    sub->add_option("--fov", fov_deg, "horizontal field of view, degrees")->capture_default_str();
+    sub->add_option("--position", position, "camera centre x,y,z in the site's local frame (m)")->required();
+    sub->add_option("--look-at", look_at, "point x,y,z the camera looks at");
+    sub->add_option("--quaternion", quaternion, "world_from_camera rotation w,x,y,z (instead of --look-at)");
+    sub->add_option("--source", source, "source URL (rtsp://..., file:..., sim:campus#id)");
+    sub->add_flag("--disabled", disabled, "register disabled");
+  };
+  CLI::App* add = app.add_subcommand("add-camera", "register a camera");
+  add_camera_flags(add);
+  CLI::App* update = app.add_subcommand("update-camera", "replace a camera's record");
+  add_camera_flags(update);
+  CLI::App* remove = app.add_subcommand("remove-camera", "remove a camera");
+  remove->add_option("--id", id, "camera id")->required();
+  app.add_subcommand("import-campus", "register the built-in campus cameras (existing ids are skipped)");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    if (e.get_exit_code() == 0) return app.exit(e);
+    std::cerr << "ave-admin: " << e.what() << " (see --help)\n";
+    return 2;
+  }
+  ave::AdminClient client(grpc::CreateChannel(server, grpc::InsecureChannelCredentials()), token);
+
+  if (app.got_subcommand("list")) {
+    auto cameras = client.ListCameras();
+    if (!cameras.ok()) return Fail(std::string(cameras.status().message()));
+    nlohmann::json out = nlohmann::json::array();
+    for (const auto& c : *cameras) {
+      std::string json;
+      (void)google::protobuf::util::MessageToJsonString(c, &json);
+      out.push_back(nlohmann::json::parse(json));
+    }
+    std::cout << out.dump(2) << "\n";
+    return 0;
+  }
+  if (app.got_subcommand("remove-camera")) {
+    if (absl::Status s = client.RemoveCamera(id); !s.ok()) return Fail(std::string(s.message()));
+    std::cout << "removed " << id << "\n";
+    return 0;
+  }
+  if (app.got_subcommand("import-campus")) {
+    auto existing = client.ListCameras();
+    if (!existing.ok()) return Fail(std::string(existing.status().message()));
+    int added = 0;
+    for (const auto& spec : ave::scene::BuiltinCampus().cameras) {
+      bool present = false;
+      for (const auto& c : *existing) present |= c.id() == spec.id;
+      if (present) continue;
+      auto r = client.AddCamera(ave::CampusCameraRecord(spec));
+      if (!r.ok()) return Fail(std::string(r.status().message()));
+      ++added;
+    }
+    std::cout << "campus cameras: " << added << " added, " << existing->size() << " already registered\n";
+    return 0;
+  }
+  // add-camera / update-camera
+  int width = 0, height = 0;
+  char x = 0;
+  std::stringstream ss(size);
+  if (!(ss >> width >> x >> height) || x != 'x') return Fail("--size must be WIDTHxHEIGHT, got '" + size + "'");
+  Eigen::Vector3d eye, target;
+  if (!ParseVec3(position, eye)) return Fail("--position must be x,y,z, got '" + position + "'");
+  ave::Rigid3d pose;
+  if (!look_at.empty()) {
+    if (!ParseVec3(look_at, target)) return Fail("--look-at must be x,y,z, got '" + look_at + "'");
+    pose = ave::LookAt(eye, target);
+  } else if (!quaternion.empty()) {
+    std::stringstream qs(quaternion);
+    double w, qx, qy, qz;
+    char c1, c2, c3;
+    if (!(qs >> w >> c1 >> qx >> c2 >> qy >> c3 >> qz)) return Fail("--quaternion must be w,x,y,z");
+    pose.rotation = Eigen::Quaterniond(w, qx, qy, qz);  // sent as given: the server checks it is unit
+    pose.translation = eye;
+  } else {
+    return Fail("give --look-at or --quaternion");
+  }
+  ave::v1::Camera camera;
+  camera.set_id(id);
+  camera.set_name(name.empty() ? id : name);
+  *camera.mutable_intrinsics() = ave::ToProto(ave::PinholeIntrinsics::FromFov(width, height, fov_deg));
+  *camera.mutable_mounting_pose() = ave::ToProto(pose);
+  camera.set_source_url(source);
+  camera.set_enabled(!disabled);
+  auto result = app.got_subcommand("add-camera") ? client.AddCamera(camera) : client.UpdateCamera(camera);
+  if (!result.ok()) return Fail(std::string(result.status().message()));
+  std::cout << (app.got_subcommand("add-camera") ? "added " : "updated ") << id << "\n";
+  return 0;
+}

@@ -1,0 +1,97 @@
+#pragma once
+// The server's live scene: the camera registry plus the latest frame of every camera, and the
+// projection-ready view of it that each viewer receives. Pure (no gRPC); thread-safe.
+//
+// Latest-frame semantics: a camera keeps only its newest accepted frame; a viewer that falls behind
+// simply receives the newest frame when it next asks, never a queue of old ones.
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "model_store/geometry/camera.h"
+#include "model_store/geometry/rigid3.h"
+#include "ave/v1/ave.pb.h"
+
+namespace ave {
+
+struct CameraEntry {
+  std::string id;
+  std::string name;
+  PinholeIntrinsics intrinsics;
+  Rigid3d mounting_pose;  // world_from_camera, local frame
+  std::string source_url;
+  bool enabled = true;
+};
+
+struct SceneStateOptions {
+  double near_m = 0.5;                          // GL projection near plane handed to viewers
+  double far_m = 600;                           // and far plane
+  std::chrono::milliseconds live_window{2000};  // a frame this recent: LIVE
+  std::chrono::milliseconds stale_window{30000};
+};
+
+// What one subscriber has been sent so far (sequence per camera), so that JPEGs go out once.
+struct ViewerCursor {
+  std::map<std::string, uint64_t> sent_sequence;
+  std::set<std::string> known_cameras;
+};
+
+class SceneState {
+ public:
+  explicit SceneState(SceneStateOptions options = {});
+
+  void UpsertCamera(const CameraEntry& camera);
+  bool RemoveCamera(const std::string& id);
+  std::optional<CameraEntry> FindCamera(const std::string& id) const;
+  std::vector<std::string> CameraIds() const;
+
+  // A sensor stream opened (with the intrinsics it announced) or closed.
+  void StreamOpened(const std::string& id, const PinholeIntrinsics& intrinsics);
+  void StreamClosed(const std::string& id);
+
+  // Keeps `frame` as the camera's latest. NotFound when the camera is not (or no longer) registered.
+  absl::Status AcceptFrame(const std::string& id, std::shared_ptr<const v1::SensorFrame> frame, int64_t received_ns);
+
+  // The latest accepted frame of a camera, if any.
+  std::shared_ptr<const v1::SensorFrame> LatestFrame(const std::string& id) const;
+
+  // Monotonic counter bumped by every change; WaitForChange returns true when it moved past `seen`.
+  uint64_t version() const;
+  bool WaitForChange(uint64_t seen, std::chrono::milliseconds timeout) const;
+  // Wakes every waiter for good (server shutdown).
+  void Shutdown();
+  bool shut_down() const;
+
+  // The update for one viewer: every enabled camera in `camera_ids` (all when empty) with its
+  // matrices and status, its JPEG only when newer than what the cursor says was sent, and the ids
+  // of cameras the viewer knew that are gone. Advances the cursor.
+  v1::SceneUpdate BuildUpdate(const std::vector<std::string>& camera_ids, bool include_jpeg, int64_t now_ns,
+                              ViewerCursor& cursor) const;
+
+ private:
+  struct Live {
+    CameraEntry entry;
+    std::optional<PinholeIntrinsics> stream_intrinsics;
+    int open_streams = 0;
+    std::shared_ptr<const v1::SensorFrame> latest;
+    int64_t latest_received_ns = 0;
+  };
+  void BumpLocked();
+
+  SceneStateOptions options_;
+  mutable std::mutex mu_;
+  mutable std::condition_variable changed_;
+  std::map<std::string, Live> cameras_;
+  uint64_t version_ = 1;
+  bool shut_down_ = false;
+};
+
+}  // namespace ave

@@ -1,0 +1,174 @@
+#include "fusion_server/core/validation.h"
+
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+#include "fusion_server/core/convert.h"
+
+namespace ave {
+namespace {
+
+constexpr int kMaxJpegSide = 16384;
+
+}  // namespace
+
+absl::StatusOr<JpegInfo> ParseJpegHeader(std::string_view b) {
+  const auto byte = [&](size_t i) { return static_cast<uint8_t>(b[i]); };
+  if (b.size() < 4 || byte(0) != 0xFF || byte(1) != 0xD8) {
+    return absl::InvalidArgumentError(absl::StrCat("not a JPEG: missing start-of-image marker (", b.size(), " bytes)"));
+  }
+  if (byte(b.size() - 2) != 0xFF || byte(b.size() - 1) != 0xD9) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("truncated JPEG: no end-of-image marker at byte ", b.size() - 2, " of ", b.size()));
+  }
+  size_t pos = 2;
+  while (pos + 4 <= b.size()) {
+    if (byte(pos) != 0xFF) {
+      return absl::InvalidArgumentError(absl::StrCat("corrupt JPEG: expected a marker at byte ", pos));
+    }
+    const uint8_t marker = byte(pos + 1);
+    if (marker == 0xFF) {  // fill byte
+      ++pos;
+      continue;
+    }
+    if (marker == 0xD8 || marker == 0x01 || (marker >= 0xD0 && marker <= 0xD7)) {  // no length
+      pos += 2;
+      continue;
+    }
+    if (marker == 0xD9 || marker == 0xDA) break;  // EOI or start of scan before any SOF
+    const size_t length = (size_t{byte(pos + 2)} << 8) | byte(pos + 3);
+    if (length < 2 || pos + 2 + length > b.size()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("truncated JPEG: segment 0xFF", absl::Hex(marker), " at byte ", pos, " runs past the end"));
+    }
+    const bool is_sof = marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC;
+    if (is_sof) {
+      if (length < 8) return absl::InvalidArgumentError(absl::StrCat("corrupt JPEG: short frame header at byte ", pos));
+      JpegInfo info;
+      info.height = (int{byte(pos + 5)} << 8) | byte(pos + 6);
+      info.width = (int{byte(pos + 7)} << 8) | byte(pos + 8);
+      info.components = byte(pos + 9);
+      info.progressive = marker == 0xC2 || marker == 0xC6 || marker == 0xCA || marker == 0xCE;
+      if (info.width <= 0 || info.height <= 0 || info.width > kMaxJpegSide || info.height > kMaxJpegSide) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("JPEG dimensions ", info.width, "x", info.height, " outside 1..", kMaxJpegSide));
+      }
+      if (info.components != 1 && info.components != 3) {
+        return absl::InvalidArgumentError(absl::StrCat("JPEG has ", info.components, " components (1 or 3 supported)"));
+      }
+      return info;
+    }
+    pos += 2 + length;
+  }
+  return absl::InvalidArgumentError("corrupt JPEG: no frame header (SOF) before the image data");
+}
+
+bool IsValidCameraId(std::string_view id) {
+  if (id.empty() || id.size() > 64) return false;
+  for (char c : id) {
+    const bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_' ||
+                    c == '-' || c == '.';
+    if (!ok) return false;
+  }
+  return true;
+}
+
+absl::Status ValidateHello(const v1::SensorHello& hello) {
+  if (!IsValidCameraId(hello.camera_id())) {
+    return absl::InvalidArgumentError("hello.camera_id must be 1..64 characters of [A-Za-z0-9_.-]");
+  }
+  if (hello.token().empty() || hello.token().size() > 4096) {
+    return absl::UnauthenticatedError(absl::StrCat("camera '", hello.camera_id(), "': hello.token missing or too long"));
+  }
+  if (hello.software_version().size() > 128) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("camera '", hello.camera_id(), "': hello.software_version longer than 128 characters"));
+  }
+  if (hello.intrinsics().distortion_size() != 0 && hello.intrinsics().distortion_size() != 5) {
+    return absl::InvalidArgumentError(absl::StrCat("camera '", hello.camera_id(),
+                                                   "': hello.intrinsics.distortion must have 0 or 5 values"));
+  }
+  const std::string why = FromProto(hello.intrinsics()).Check();
+  if (!why.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat("camera '", hello.camera_id(), "': hello.intrinsics.", why));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ValidatePose(const v1::Pose& pose, const std::string& field) {
+  const auto& p = pose.position();
+  if (!std::isfinite(p.x()) || !std::isfinite(p.y()) || !std::isfinite(p.z())) {
+    return absl::InvalidArgumentError(absl::StrCat(field, ".position must be finite"));
+  }
+  const auto& q = pose.orientation();
+  const double norm = std::sqrt(q.w() * q.w() + q.x() * q.x() + q.y() * q.y() + q.z() * q.z());
+  if (!std::isfinite(norm)) return absl::InvalidArgumentError(absl::StrCat(field, ".orientation must be finite"));
+  if (std::abs(norm - 1.0) > 1e-3) {
+    return absl::InvalidArgumentError(absl::StrCat(field, ".orientation must be a unit quaternion (norm ", norm, ")"));
+  }
+  if (pose.covariance_size() != 0) {
+    if (pose.covariance_size() != 36) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(field, ".covariance must have 0 or 36 values, not ", pose.covariance_size()));
+    }
+    for (int i = 0; i < 36; ++i) {
+      if (!std::isfinite(pose.covariance(i))) {
+        return absl::InvalidArgumentError(absl::StrCat(field, ".covariance[", i, "] must be finite"));
+      }
+    }
+    for (int i = 0; i < 6; ++i) {
+      if (pose.covariance(i * 7) < 0) {
+        return absl::InvalidArgumentError(absl::StrCat(field, ".covariance diagonal [", i, "] is negative"));
+      }
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ValidateFrame(const v1::SensorFrame& frame, const v1::Intrinsics& intrinsics, uint64_t last_sequence,
+                           const FrameLimits& limits) {
+  const std::string where = absl::StrCat("frame ", frame.sequence(), ": ");
+  if (frame.sequence() <= last_sequence) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(where, "sequence must increase (last accepted ", last_sequence, ")"));
+  }
+  if (frame.capture_time_ns() <= 0) {
+    return absl::InvalidArgumentError(absl::StrCat(where, "capture_time_ns must be > 0"));
+  }
+  if (frame.has_pose()) {
+    if (absl::Status s = ValidatePose(frame.pose(), absl::StrCat(where, "pose")); !s.ok()) return s;
+  }
+  if (frame.boxes_size() > limits.max_boxes) {
+    return absl::InvalidArgumentError(absl::StrCat(where, frame.boxes_size(), " boxes (at most ", limits.max_boxes, ")"));
+  }
+  for (int i = 0; i < frame.boxes_size(); ++i) {
+    const auto& box = frame.boxes(i);
+    if (box.corners_size() != 4) {
+      return absl::InvalidArgumentError(absl::StrCat(where, "boxes[", i, "] must have 4 corners"));
+    }
+    for (const auto& c : box.corners()) {
+      if (!std::isfinite(c.x()) || !std::isfinite(c.y())) {
+        return absl::InvalidArgumentError(absl::StrCat(where, "boxes[", i, "] has a non-finite corner"));
+      }
+    }
+    if (!std::isfinite(box.score()) || box.score() < 0 || box.score() > 1) {
+      return absl::InvalidArgumentError(absl::StrCat(where, "boxes[", i, "].score must be in [0, 1]"));
+    }
+  }
+  if (frame.jpeg().size() > limits.max_jpeg_bytes) {
+    return absl::ResourceExhaustedError(
+        absl::StrCat(where, "jpeg is ", frame.jpeg().size(), " bytes (at most ", limits.max_jpeg_bytes, ")"));
+  }
+  if (!frame.jpeg().empty()) {
+    absl::StatusOr<JpegInfo> info = ParseJpegHeader(frame.jpeg());
+    if (!info.ok()) return absl::InvalidArgumentError(absl::StrCat(where, "jpeg: ", info.status().message()));
+    if (info->width != static_cast<int>(intrinsics.width()) || info->height != static_cast<int>(intrinsics.height())) {
+      return absl::InvalidArgumentError(absl::StrCat(where, "jpeg is ", info->width, "x", info->height,
+                                                     " but the camera's intrinsics say ", intrinsics.width(), "x",
+                                                     intrinsics.height()));
+    }
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace ave

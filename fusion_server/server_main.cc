@@ -1,0 +1,77 @@
+// ave-server: the fusion server. Thin main over fusion_server/service.
+#include <csignal>
+#include <cstdlib>
+#include <iostream>
+#include <thread>
+
+#include <CLI/CLI.hpp>
+
+#include "fusion_server/service/server.h"
+#include "model_store/common/log.h"
+
+namespace {
+
+std::string EnvOr(const char* name, std::string fallback) {
+  const char* v = std::getenv(name);
+  return v ? std::string(v) : fallback;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  ave::ServerOptions options;
+  options.sensor_token = EnvOr("AVE_SENSOR_TOKEN", "");
+  options.viewer_token = EnvOr("AVE_VIEWER_TOKEN", "");
+  options.admin_token = EnvOr("AVE_ADMIN_TOKEN", "");
+  double max_frame_mb = 8;
+  std::string log_level = "info";
+
+  CLI::App app{"ave-server: AVE fusion server (sensor ingest, camera registry, scene state for viewers)"};
+  app.add_option("--listen", options.listen_address, "host:port to listen on (port 0 = any free port)")
+      ->capture_default_str();
+  app.add_option("--store", options.store_path, "SQLite model store file (created if missing)")->capture_default_str();
+  app.add_option("--sensor-token", options.sensor_token, "bearer token sensors present (env AVE_SENSOR_TOKEN)");
+  app.add_option("--viewer-token", options.viewer_token, "bearer token viewers present (env AVE_VIEWER_TOKEN)");
+  app.add_option("--admin-token", options.admin_token, "bearer token administrators present (env AVE_ADMIN_TOKEN)");
+  app.add_option("--max-frame-mb", max_frame_mb, "largest JPEG accepted, MiB")->capture_default_str()->check(CLI::Range(0.01, 15.0));
+  app.add_option("--max-fps-hint", options.max_fps_hint, "frame rate asked of sensors (0 = any)")->capture_default_str();
+  app.add_option("--campus-grid", options.campus_grid_m, "terrain grid (m) when seeding the built-in campus")
+      ->capture_default_str();
+  app.add_flag("!--no-seed-campus", options.seed_campus, "do not store the built-in campus in an empty store");
+  app.add_option("--log-level", log_level, "debug, info, warning or error")->check(CLI::IsMember({"debug", "info", "warning", "error"}));
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    if (e.get_exit_code() == 0) return app.exit(e);
+    std::cerr << "ave-server: " << e.what() << " (see --help)\n";
+    return 2;
+  }
+  ave::log::MinLevel() = log_level == "debug" ? ave::log::Level::kDEBUG
+                         : log_level == "warning" ? ave::log::Level::kWARNING
+                         : log_level == "error"   ? ave::log::Level::kERROR
+                                                  : ave::log::Level::kINFO;
+  options.frame_limits.max_jpeg_bytes = static_cast<size_t>(max_frame_mb * (1 << 20));
+
+  // Signals are taken by a waiting thread, so shutdown runs outside any signal handler.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+
+  auto server = ave::FusionServer::Start(options);
+  if (!server.ok()) {
+    std::cerr << "ave-server: " << server.status().message() << "\n";
+    return 1;
+  }
+  std::cout << "listening on port " << (*server)->port() << std::endl;
+  std::thread waiter([&] {
+    int sig = 0;
+    sigwait(&signals, &sig);
+    AVE_LOG(INFO) << "signal " << sig << ": draining streams and shutting down";
+    (*server)->Shutdown(std::chrono::milliseconds(2000));
+  });
+  (*server)->Wait();
+  waiter.join();
+  return 0;
+}

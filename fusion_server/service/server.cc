@@ -1,0 +1,125 @@
+#include "fusion_server/service/server.h"
+
+#include <cmath>
+
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/health_check_service_interface.h>
+
+#include "absl/strings/str_cat.h"
+#include "fusion_server/service/services.h"
+#include "model_store/common/log.h"
+#include "model_store/scene/campus.h"
+
+namespace ave {
+
+std::string ServerOptions::Check() const {
+  if (listen_address.empty()) return "listen_address is empty";
+  if (store_path.empty()) return "store_path is empty";
+  if (sensor_token.empty() && viewer_token.empty() && admin_token.empty()) {
+    return "no role token set (sensor_token, viewer_token, admin_token): nobody could connect";
+  }
+  if (frame_limits.max_jpeg_bytes == 0 || frame_limits.max_jpeg_bytes + (1 << 16) > size_t(max_message_bytes)) {
+    return "frame_limits.max_jpeg_bytes must be > 0 and leave 64 KiB below max_message_bytes";
+  }
+  if (!(max_fps_hint >= 0) || !std::isfinite(max_fps_hint)) return "max_fps_hint must be finite and >= 0";
+  if (jpeg_quality_hint > 100) return "jpeg_quality_hint must be 0..100";
+  if (!(default_viewer_rate_hz > 0) || !(max_viewer_rate_hz > 0)) return "viewer rates must be > 0";
+  if (!(campus_grid_m >= 0.25 && campus_grid_m <= 20)) return "campus_grid_m must be in 0.25..20";
+  return {};
+}
+
+struct FusionServer::Impl {
+  ServerOptions options;
+  std::unique_ptr<store::Store> store;
+  SceneState state;
+  uint64_t model_version = 0;
+  std::unique_ptr<internal::SensorServiceImpl> sensor;
+  std::unique_ptr<internal::SceneServiceImpl> scene;
+  std::unique_ptr<internal::AdminServiceImpl> admin;
+  std::unique_ptr<grpc::Server> server;
+  int port = 0;
+  bool shut_down = false;
+
+  explicit Impl(const ServerOptions& o) : options(o), state(o.scene) {}
+};
+
+FusionServer::FusionServer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+
+FusionServer::~FusionServer() { Shutdown(std::chrono::milliseconds(0)); }
+
+absl::StatusOr<std::unique_ptr<FusionServer>> FusionServer::Start(const ServerOptions& options) {
+  if (const std::string why = options.Check(); !why.empty()) {
+    return absl::InvalidArgumentError("server options: " + why);
+  }
+  auto impl = std::make_unique<Impl>(options);
+  absl::StatusOr<std::unique_ptr<store::Store>> store = store::Store::Open(options.store_path);
+  if (!store.ok()) return store.status();
+  impl->store = std::move(*store);
+
+  // Camera registry from the store.
+  absl::StatusOr<std::vector<store::CameraRecord>> cameras = impl->store->ListCameras();
+  if (!cameras.ok()) return cameras.status();
+  for (const auto& c : *cameras) impl->state.UpsertCamera(internal::ToEntry(c));
+
+  // Static model: the newest in the store, or the built-in campus on a fresh store.
+  absl::StatusOr<std::optional<store::StaticModelRecord>> model = impl->store->LatestStaticModel();
+  if (!model.ok()) return model.status();
+  if (!model->has_value() && options.seed_campus) {
+    const scene::SyntheticCampus campus = scene::BuiltinCampus();
+    absl::StatusOr<int64_t> version =
+        impl->store->PutStaticModel(campus.name, scene::BuildStaticMesh(campus, options.campus_grid_m));
+    if (!version.ok()) return version.status();
+    model = impl->store->LatestStaticModel();
+    if (!model.ok()) return model.status();
+    AVE_LOG(INFO) << "stored the built-in campus as static model version " << *version;
+  }
+  std::vector<v1::StaticModelChunk> chunks;
+  if (model->has_value()) {
+    const store::StaticModelRecord& record = **model;
+    impl->model_version = static_cast<uint64_t>(record.version);
+    chunks = internal::ChunkMesh(record.mesh, impl->model_version, record.name);
+    AVE_LOG(INFO) << "static model '" << record.name << "' version " << record.version << ": "
+                  << record.mesh.TriangleCount() << " triangles in " << chunks.size() << " chunks";
+  } else {
+    AVE_LOG(WARNING) << "the store holds no static model; viewers will see cameras only";
+  }
+
+  impl->sensor = std::make_unique<internal::SensorServiceImpl>(impl->options, impl->state);
+  impl->scene = std::make_unique<internal::SceneServiceImpl>(impl->options, impl->state, std::move(chunks));
+  impl->admin = std::make_unique<internal::AdminServiceImpl>(impl->options, impl->state, *impl->store);
+
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::ServerBuilder builder;
+  // Insecure transport for now; TLS and mutual TLS arrive with issue 8.
+  builder.AddListeningPort(options.listen_address, grpc::InsecureServerCredentials(), &impl->port);
+  builder.SetMaxReceiveMessageSize(options.max_message_bytes);
+  builder.SetMaxSendMessageSize(options.max_message_bytes);
+  builder.RegisterService(impl->sensor.get());
+  builder.RegisterService(impl->scene.get());
+  builder.RegisterService(impl->admin.get());
+  impl->server = builder.BuildAndStart();
+  if (!impl->server || impl->port == 0) {
+    return absl::UnavailableError(absl::StrCat("cannot listen on ", options.listen_address, " (address in use?)"));
+  }
+  AVE_LOG(INFO) << "ave-server listening on port " << impl->port << ", store " << options.store_path << ", "
+                << cameras->size() << " cameras registered";
+  return std::unique_ptr<FusionServer>(new FusionServer(std::move(impl)));
+}
+
+int FusionServer::port() const { return impl_->port; }
+SceneState& FusionServer::state() { return impl_->state; }
+uint64_t FusionServer::static_model_version() const { return impl_->model_version; }
+
+void FusionServer::Shutdown(std::chrono::milliseconds grace) {
+  if (impl_->shut_down || !impl_->server) return;
+  impl_->shut_down = true;
+  impl_->state.Shutdown();
+  impl_->server->Shutdown(std::chrono::system_clock::now() + grace);
+  AVE_LOG(INFO) << "ave-server stopped";
+}
+
+void FusionServer::Wait() {
+  if (impl_->server) impl_->server->Wait();
+}
+
+}  // namespace ave

@@ -1,0 +1,59 @@
+#pragma once
+// The fusion server: gRPC services for sensors, viewers and administrators over one SceneState
+// and one SQLite model store. Start() binds (port 0 picks a free port), loads the camera registry
+// and the static model from the store, and serves until Shutdown().
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "absl/status/statusor.h"
+#include "fusion_server/core/scene_state.h"
+#include "fusion_server/core/validation.h"
+
+namespace ave {
+
+struct ServerOptions {
+  std::string listen_address = "127.0.0.1:50051";  // host:port; port 0 = any free port
+  std::string store_path = "ave.db";               // SQLite file (":memory:" for tests)
+  // Bearer tokens per role (MISSION part G). Sensors send theirs in the hello; viewers and
+  // administrators in "authorization: Bearer <token>" metadata. Empty disables that role.
+  std::string sensor_token;
+  std::string viewer_token;
+  std::string admin_token;
+  FrameLimits frame_limits;
+  int max_message_bytes = 16 << 20;  // gRPC hard cap; frame_limits.max_jpeg_bytes is the clear-error limit
+  float max_fps_hint = 30;           // flow-control hint sent to sensors (0 = none)
+  uint32_t jpeg_quality_hint = 0;    // 0 = keep the sensor's
+  float default_viewer_rate_hz = 30;
+  float max_viewer_rate_hz = 60;
+  bool seed_campus = true;     // store the built-in campus as the static model when the store has none
+  double campus_grid_m = 2.0;  // its terrain grid resolution
+  SceneStateOptions scene;
+
+  // Empty when usable, else names the bad field.
+  std::string Check() const;
+};
+
+class FusionServer {
+ public:
+  static absl::StatusOr<std::unique_ptr<FusionServer>> Start(const ServerOptions& options);
+  ~FusionServer();
+
+  int port() const;
+  SceneState& state();
+  uint64_t static_model_version() const;
+
+  // Stops accepting calls, wakes every subscriber and ends open streams after `grace`.
+  void Shutdown(std::chrono::milliseconds grace = std::chrono::milliseconds(2000));
+  // Blocks until the server has shut down.
+  void Wait();
+
+  struct Impl;
+
+ private:
+  explicit FusionServer(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace ave

@@ -1,0 +1,88 @@
+// ave-agent: a sensor node. Captures frames from a source and streams them to ave-server.
+//   ave-agent --camera cam1 --source sim:campus#cam1 --server 127.0.0.1:50051 --token T
+#include <csignal>
+#include <cstdlib>
+#include <iostream>
+#include <sstream>
+#include <thread>
+
+#include <CLI/CLI.hpp>
+
+#include "model_store/common/log.h"
+#include "sensor_agent/stream/agent_streamer.h"
+
+namespace {
+
+std::atomic<bool> g_stop{false};
+
+void OnSignal(int) { g_stop = true; }
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  ave::AgentOptions options;
+  if (const char* t = std::getenv("AVE_SENSOR_TOKEN")) options.token = t;
+  std::string source_spec;
+  std::string position, look_at;
+  double fov_deg = 60;
+  CLI::App app{"ave-agent: AVE sensor agent (capture, JPEG, pose, stream to the fusion server)"};
+  app.add_option("--server", options.server, "fusion server host:port")->capture_default_str();
+  app.add_option("--camera", options.camera_id, "this camera's registered id")->required();
+  app.add_option("--token", options.token, "sensor bearer token (env AVE_SENSOR_TOKEN)");
+  app.add_option("--source", source_spec, "sim:campus#ID, file:PATH, rtsp://..., v4l2:/dev/videoN")->required();
+  app.add_option("--fps", options.fps, "frames per second to send")->capture_default_str()->check(CLI::Range(0.1, 240.0));
+  app.add_option("--jpeg-quality", options.jpeg_quality, "JPEG quality 1..100")->capture_default_str()->check(CLI::Range(1, 100));
+  app.add_option("--max-frames", options.max_frames, "stop after N frames (0 = never)")->capture_default_str();
+  app.add_option("--duration", options.duration_s, "stop after S seconds (0 = never)")->capture_default_str();
+  app.add_option("--position", position, "mounting position x,y,z (m, site frame) for sources without a pose");
+  app.add_option("--look-at", look_at, "point x,y,z the mounted camera looks at");
+  app.add_option("--fov", fov_deg, "horizontal field of view (deg) for sources without intrinsics")->capture_default_str();
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    if (e.get_exit_code() == 0) return app.exit(e);
+    std::cerr << "ave-agent: " << e.what() << " (see --help)\n";
+    return 2;
+  }
+  if (position.empty() != look_at.empty()) {
+    std::cerr << "ave-agent: --position and --look-at go together\n";
+    return 2;
+  }
+  if (!position.empty()) {
+    auto parse = [](const std::string& s, Eigen::Vector3d& v) {
+      std::stringstream ss(s);
+      char a = 0, b = 0;
+      return static_cast<bool>(ss >> v.x() >> a >> v.y() >> b >> v.z()) && a == ',' && b == ',';
+    };
+    Eigen::Vector3d eye, target;
+    if (!parse(position, eye) || !parse(look_at, target)) {
+      std::cerr << "ave-agent: --position/--look-at must be x,y,z\n";
+      return 2;
+    }
+    options.mounting_pose = ave::LookAt(eye, target);
+  }
+  if (const std::string why = options.Check(); !why.empty()) {
+    std::cerr << "ave-agent: " << why << "\n";
+    return 2;
+  }
+  auto source = ave::OpenSource(source_spec, {.fps = options.fps, .default_fov_deg = fov_deg});
+  if (!source.ok()) {
+    std::cerr << "ave-agent: " << source.status().message() << "\n";
+    return 1;
+  }
+  std::signal(SIGINT, OnSignal);
+  std::signal(SIGTERM, OnSignal);
+  AVE_LOG(INFO) << "camera '" << options.camera_id << "': streaming " << (*source)->description() << " to "
+                << options.server << " at " << options.fps << " fps";
+  ave::AgentStreamer streamer(options, std::move(*source));
+  const absl::Status status = streamer.Run(g_stop);
+  const ave::AgentStats s = streamer.stats();
+  std::cout << "{\"camera\":\"" << options.camera_id << "\",\"frames_sent\":" << s.frames_sent
+            << ",\"frames_acked\":" << s.frames_acked << ",\"connects\":" << s.connects
+            << ",\"bytes_sent\":" << s.bytes_sent << "}" << std::endl;
+  if (!status.ok()) {
+    std::cerr << "ave-agent: " << status.message() << "\n";
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,158 @@
+#include "sensor_agent/source/frame_source.h"
+
+#include <chrono>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include "absl/strings/str_cat.h"
+#include "model_store/scene/campus.h"
+#include "sensor_agent/sim/sim_camera.h"
+
+namespace ave {
+namespace {
+
+int64_t WallNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+class SimCampusSource final : public FrameSource {
+ public:
+  SimCampusSource(scene::SyntheticCampus campus, scene::CameraSpec camera, const SourceOptions& options)
+      : campus_(std::move(campus)), camera_(std::move(camera)), renderer_(campus_), options_(options) {}
+
+  absl::StatusOr<CapturedFrame> Next() override {
+    CapturedFrame frame;
+    frame.scene_time_s = options_.sim_start_s + static_cast<double>(index_++) / options_.fps;
+    frame.capture_time_ns = WallNs();
+    sim::SimImage image = renderer_.Render(camera_.intrinsics, camera_.world_from_camera, frame.scene_time_s);
+    frame.width = image.width;
+    frame.height = image.height;
+    frame.bgr = std::move(image.bgr);
+    frame.world_from_camera = camera_.world_from_camera;
+    return frame;
+  }
+  PinholeIntrinsics intrinsics() const override { return camera_.intrinsics; }
+  std::string description() const override { return "simulated " + campus_.name + " camera " + camera_.id; }
+  bool live() const override { return false; }
+
+ private:
+  scene::SyntheticCampus campus_;
+  scene::CameraSpec camera_;
+  sim::CampusRenderer renderer_;
+  SourceOptions options_;
+  int64_t index_ = 0;
+};
+
+class VideoCaptureSource final : public FrameSource {
+ public:
+  VideoCaptureSource(std::string spec, std::unique_ptr<cv::VideoCapture> capture, bool live,
+                     const SourceOptions& options)
+      : spec_(std::move(spec)), capture_(std::move(capture)), live_(live), options_(options) {}
+
+  absl::StatusOr<CapturedFrame> Next() override {
+    cv::Mat image;
+    if (!capture_->read(image) || image.empty()) {
+      if (!live_) return absl::OutOfRangeError(absl::StrCat(spec_, ": end of video after ", count_, " frames"));
+      return absl::UnavailableError(absl::StrCat(spec_, ": read failed after ", count_, " frames"));
+    }
+    if (image.channels() == 1) cv::cvtColor(image, image, cv::COLOR_GRAY2BGR);
+    if (image.channels() == 4) cv::cvtColor(image, image, cv::COLOR_BGRA2BGR);
+    if (intrinsics_.width == 0) {
+      intrinsics_ = options_.intrinsics.width > 0
+                        ? options_.intrinsics
+                        : PinholeIntrinsics::FromFov(image.cols, image.rows, options_.default_fov_deg);
+    }
+    if (image.cols != intrinsics_.width || image.rows != intrinsics_.height) {
+      cv::resize(image, image, cv::Size(intrinsics_.width, intrinsics_.height), 0, 0, cv::INTER_AREA);
+    }
+    CapturedFrame frame;
+    frame.capture_time_ns = WallNs();
+    if (first_ns_ == 0) first_ns_ = frame.capture_time_ns;
+    frame.scene_time_s = (frame.capture_time_ns - first_ns_) * 1e-9;
+    frame.width = image.cols;
+    frame.height = image.rows;
+    frame.bgr.assign(image.data, image.data + image.total() * 3);
+    if (!image.isContinuous()) {
+      frame.bgr.clear();
+      for (int r = 0; r < image.rows; ++r) frame.bgr.insert(frame.bgr.end(), image.ptr(r), image.ptr(r) + image.cols * 3);
+    }
+    ++count_;
+    return frame;
+  }
+  PinholeIntrinsics intrinsics() const override {
+    if (intrinsics_.width > 0) return intrinsics_;
+    if (options_.intrinsics.width > 0) return options_.intrinsics;
+    const int w = static_cast<int>(capture_->get(cv::CAP_PROP_FRAME_WIDTH));
+    const int h = static_cast<int>(capture_->get(cv::CAP_PROP_FRAME_HEIGHT));
+    return PinholeIntrinsics::FromFov(std::max(w, 1), std::max(h, 1), options_.default_fov_deg);
+  }
+  std::string description() const override { return spec_; }
+  bool live() const override { return live_; }
+
+ private:
+  std::string spec_;
+  std::unique_ptr<cv::VideoCapture> capture_;
+  bool live_;
+  SourceOptions options_;
+  PinholeIntrinsics intrinsics_;
+  int64_t count_ = 0;
+  int64_t first_ns_ = 0;
+};
+
+bool StartsWith(const std::string& s, const std::string& prefix) { return s.rfind(prefix, 0) == 0; }
+
+}  // namespace
+
+absl::StatusOr<std::unique_ptr<FrameSource>> OpenSource(const std::string& spec, const SourceOptions& options) {
+  if (!(options.fps > 0 && options.fps <= 1000)) {
+    return absl::InvalidArgumentError(absl::StrCat("source '", spec, "': fps must be in (0, 1000]"));
+  }
+  if (options.intrinsics.width > 0) {
+    if (const std::string why = options.intrinsics.Check(); !why.empty()) {
+      return absl::InvalidArgumentError(absl::StrCat("source '", spec, "': intrinsics.", why));
+    }
+  }
+  if (StartsWith(spec, "sim:")) {
+    const std::string rest = spec.substr(4);
+    const size_t hash = rest.find('#');
+    if (hash == std::string::npos) {
+      return absl::InvalidArgumentError(absl::StrCat("source '", spec, "': expected sim:SCENE#CAMERA"));
+    }
+    const std::string scene_name = rest.substr(0, hash), camera_id = rest.substr(hash + 1);
+    if (scene_name != "campus") {
+      return absl::NotFoundError(absl::StrCat("source '", spec, "': unknown scene '", scene_name, "' (known: campus)"));
+    }
+    scene::SyntheticCampus campus = scene::BuiltinCampus();
+    const scene::CameraSpec* camera = campus.FindCamera(camera_id);
+    if (!camera) {
+      return absl::NotFoundError(absl::StrCat("source '", spec, "': the campus has no camera '", camera_id, "'"));
+    }
+    scene::CameraSpec copy = *camera;
+    return std::unique_ptr<FrameSource>(new SimCampusSource(std::move(campus), std::move(copy), options));
+  }
+  auto capture = std::make_unique<cv::VideoCapture>();
+  bool live = true;
+  bool opened = false;
+  if (StartsWith(spec, "file:")) {
+    live = false;
+    opened = capture->open(spec.substr(5));
+  } else if (StartsWith(spec, "rtsp://") || StartsWith(spec, "http://") || StartsWith(spec, "https://")) {
+    opened = capture->open(spec, cv::CAP_FFMPEG);
+  } else if (StartsWith(spec, "v4l2:")) {
+    const std::string dev = spec.substr(5);
+    const bool numeric = !dev.empty() && dev.find_first_not_of("0123456789") == std::string::npos;
+    opened = numeric ? capture->open(std::stoi(dev), cv::CAP_V4L2) : capture->open(dev, cv::CAP_V4L2);
+  } else {
+    return absl::InvalidArgumentError(
+        absl::StrCat("source '", spec, "': unknown scheme (use sim:, file:, rtsp://, http(s)://, v4l2:)"));
+  }
+  if (!opened || !capture->isOpened()) {
+    return absl::UnavailableError(absl::StrCat("source '", spec, "': cannot open"));
+  }
+  return std::unique_ptr<FrameSource>(new VideoCaptureSource(spec, std::move(capture), live, options));
+}
+
+}  // namespace ave

@@ -1,0 +1,54 @@
+#pragma once
+// Where an agent's frames come from, behind one interface: a video file, an RTSP/HTTP stream or a
+// V4L2 device (all through OpenCV VideoCapture), or the simulated campus camera.
+//
+// Source specs:
+//   sim:campus#cam1      the built-in campus seen by its camera cam1 (ground-truth pose attached)
+//   file:/path/video.mp4 a video file (ends at its last frame)
+//   rtsp://host/stream   a network stream (also http://, https://)
+//   v4l2:/dev/video0     a local capture device (or v4l2:0)
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "model_store/geometry/camera.h"
+#include "model_store/geometry/rigid3.h"
+
+namespace ave {
+
+struct CapturedFrame {
+  int64_t capture_time_ns = 0;  // sensor clock (system clock here)
+  double scene_time_s = 0;      // simulated time for sim sources; seconds since the first frame otherwise
+  int width = 0;
+  int height = 0;
+  std::vector<uint8_t> bgr;  // 3 bytes per pixel, top row first
+  std::optional<Rigid3d> world_from_camera;  // the source's own pose, if it knows one
+};
+
+class FrameSource {
+ public:
+  virtual ~FrameSource() = default;
+  // The next frame; OutOfRange at the end of a finite source, Unavailable on a read failure.
+  virtual absl::StatusOr<CapturedFrame> Next() = 0;
+  virtual PinholeIntrinsics intrinsics() const = 0;
+  virtual std::string description() const = 0;
+  // True when the device delivers frames at its own rate (live cameras); false when the caller
+  // must pace them (files, the simulator).
+  virtual bool live() const = 0;
+};
+
+struct SourceOptions {
+  double fps = 10;  // simulated frame rate (sim sources step scene time by 1/fps)
+  double sim_start_s = 0;
+  // Intrinsics for sources that cannot know them (files, devices); width 0 = derive from the first
+  // frame with `default_fov_deg`.
+  PinholeIntrinsics intrinsics;
+  double default_fov_deg = 60;
+};
+
+absl::StatusOr<std::unique_ptr<FrameSource>> OpenSource(const std::string& spec, const SourceOptions& options);
+
+}  // namespace ave

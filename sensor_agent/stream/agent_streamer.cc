@@ -1,0 +1,188 @@
+#include "sensor_agent/stream/agent_streamer.h"
+
+#include <algorithm>
+#include <random>
+#include <thread>
+
+#include <grpcpp/grpcpp.h>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "absl/strings/str_cat.h"
+#include "ave/v1/ave.grpc.pb.h"
+#include "fusion_server/core/convert.h"
+#include "model_store/common/log.h"
+
+namespace ave {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// Sleeps up to `duration`, waking early when `stop` is set.
+void SleepUnlessStopped(Clock::duration duration, const std::atomic<bool>& stop) {
+  const auto until = Clock::now() + duration;
+  while (!stop.load() && Clock::now() < until) {
+    std::this_thread::sleep_for(std::min<Clock::duration>(until - Clock::now(), std::chrono::milliseconds(20)));
+  }
+}
+
+bool IsFatal(grpc::StatusCode code) {
+  return code == grpc::StatusCode::UNAUTHENTICATED || code == grpc::StatusCode::PERMISSION_DENIED;
+}
+
+}  // namespace
+
+std::string AgentOptions::Check() const {
+  if (server.empty()) return "server is empty";
+  if (camera_id.empty()) return "camera_id is empty";
+  if (!(fps > 0 && fps <= 240)) return "fps must be in (0, 240]";
+  if (jpeg_quality < 1 || jpeg_quality > 100) return "jpeg_quality must be in 1..100";
+  if (max_frames < 0) return "max_frames must be >= 0";
+  if (!(duration_s >= 0)) return "duration_s must be >= 0";
+  if (backoff_initial.count() <= 0 || backoff_max < backoff_initial) return "backoff must be 0 < initial <= max";
+  return {};
+}
+
+AgentStreamer::AgentStreamer(AgentOptions options, std::unique_ptr<FrameSource> source)
+    : options_(std::move(options)), source_(std::move(source)) {}
+
+AgentStats AgentStreamer::stats() const {
+  std::lock_guard lock(stats_mu_);
+  return stats_;
+}
+
+absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
+  if (const std::string why = options_.Check(); !why.empty()) return absl::InvalidArgumentError("agent: " + why);
+  const std::string& id = options_.camera_id;
+  std::mt19937_64 rng(std::hash<std::string>{}(id) ^ static_cast<uint64_t>(Clock::now().time_since_epoch().count()));
+  const auto started = Clock::now();
+  auto backoff = options_.backoff_initial;
+  uint64_t sequence = 0;
+  int64_t sent_total = 0;
+  bool source_done = false;
+
+  while (!stop.load() && !source_done) {
+    auto channel = grpc::CreateChannel(options_.server, grpc::InsecureChannelCredentials());
+    auto stub = v1::SensorService::NewStub(channel);
+    grpc::ClientContext context;
+    auto stream = stub->Stream(&context);
+    {
+      std::lock_guard lock(stats_mu_);
+      ++stats_.connects;
+    }
+
+    v1::SensorMessage hello;
+    hello.mutable_hello()->set_camera_id(id);
+    hello.mutable_hello()->set_token(options_.token);
+    *hello.mutable_hello()->mutable_intrinsics() = ToProto(source_->intrinsics());
+    hello.mutable_hello()->set_software_version(options_.software_version);
+    bool healthy = stream->Write(hello);
+
+    // Acks and flow-control hints arrive on their own thread.
+    std::atomic<float> hint_fps{0};
+    std::atomic<int> hint_quality{0};
+    std::atomic<bool> acked_once{false};
+    std::thread reader([&] {
+      v1::SensorAck ack;
+      while (stream->Read(&ack)) {
+        hint_fps = ack.hint().max_fps();
+        hint_quality = static_cast<int>(ack.hint().jpeg_quality());
+        acked_once = true;
+        std::lock_guard lock(stats_mu_);
+        ++stats_.frames_acked;
+      }
+    });
+
+    auto next_tick = Clock::now();
+    while (healthy && !stop.load()) {
+      if (options_.max_frames > 0 && sent_total >= options_.max_frames) {
+        source_done = true;
+        break;
+      }
+      if (options_.duration_s > 0 && Clock::now() - started >= std::chrono::duration<double>(options_.duration_s)) {
+        source_done = true;
+        break;
+      }
+      absl::StatusOr<CapturedFrame> frame = source_->Next();
+      if (!frame.ok()) {
+        if (frame.status().code() == absl::StatusCode::kOutOfRange) {
+          AVE_LOG(INFO) << "camera '" << id << "': " << frame.status().message();
+          source_done = true;
+          break;
+        }
+        AVE_LOG(WARNING) << "camera '" << id << "': " << frame.status().message();
+        SleepUnlessStopped(std::chrono::milliseconds(200), stop);
+        continue;
+      }
+      {
+        std::lock_guard lock(stats_mu_);
+        ++stats_.frames_captured;
+      }
+      const int quality = hint_quality.load() > 0 ? hint_quality.load() : options_.jpeg_quality;
+      std::vector<uchar> jpeg;
+      const cv::Mat image(frame->height, frame->width, CV_8UC3, frame->bgr.data());
+      if (!cv::imencode(".jpg", image, jpeg, {cv::IMWRITE_JPEG_QUALITY, quality})) {
+        AVE_LOG(ERROR) << "camera '" << id << "': JPEG encoding failed";
+        continue;
+      }
+      v1::SensorMessage message;
+      v1::SensorFrame* out = message.mutable_frame();
+      out->set_capture_time_ns(frame->capture_time_ns);
+      out->set_sequence(++sequence);
+      if (frame->world_from_camera) {
+        *out->mutable_pose() = ToProto(*frame->world_from_camera);
+      } else if (options_.mounting_pose) {
+        *out->mutable_pose() = ToProto(*options_.mounting_pose);
+      }
+      out->set_jpeg(jpeg.data(), jpeg.size());
+      if (!stream->Write(message)) {
+        healthy = false;
+        break;
+      }
+      ++sent_total;
+      {
+        std::lock_guard lock(stats_mu_);
+        ++stats_.frames_sent;
+        stats_.bytes_sent += static_cast<int64_t>(jpeg.size());
+      }
+      if (acked_once) backoff = options_.backoff_initial;  // the link works again
+      // Pace non-live sources: the slower of our rate and the server's hint.
+      if (!source_->live()) {
+        const double fps = hint_fps.load() > 0 ? std::min<double>(options_.fps, hint_fps.load()) : options_.fps;
+        next_tick += std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / fps));
+        if (next_tick < Clock::now()) next_tick = Clock::now();
+        SleepUnlessStopped(next_tick - Clock::now(), stop);
+      }
+    }
+
+    if (stop.load()) context.TryCancel();
+    stream->WritesDone();
+    const grpc::Status status = stream->Finish();
+    reader.join();
+    if (stop.load() || (source_done && status.ok())) break;
+    if (!status.ok()) {
+      {
+        std::lock_guard lock(stats_mu_);
+        stats_.last_error = status.error_message();
+      }
+      if (IsFatal(status.error_code())) {
+        AVE_LOG(ERROR) << "camera '" << id << "': refused by the server: " << status.error_message();
+        return absl::Status(static_cast<absl::StatusCode>(status.error_code()), status.error_message());
+      }
+      if (source_done) break;
+      // Jittered exponential backoff: a random wait in [backoff/2, backoff], then double it.
+      std::uniform_int_distribution<int64_t> jitter(backoff.count() / 2, backoff.count());
+      const auto wait = std::chrono::milliseconds(jitter(rng));
+      AVE_LOG(WARNING) << "camera '" << id << "': stream ended (" << status.error_message() << "); reconnecting in "
+                       << wait.count() << " ms";
+      SleepUnlessStopped(wait, stop);
+      backoff = std::min(options_.backoff_max, backoff * 2);
+    }
+  }
+  const AgentStats s = stats();
+  AVE_LOG(INFO) << "camera '" << id << "': stopped after " << s.frames_sent << " frames sent, " << s.frames_acked
+                << " acked, " << s.connects << " connections";
+  return absl::OkStatus();
+}
+
+}  // namespace ave
