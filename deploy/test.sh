@@ -1,0 +1,12 @@
+#!/usr/bin/env bash
+# The whole test suite: installs what is missing, builds, runs every test with ctest.
+#   sudo deploy/test.sh            (AVE_SKIP_DEPS=1 skips the package check)
+set -euo pipefail
+root=$(cd "$(dirname "$0")/.." && pwd)
+build=${AVE_BUILD_DIR:-$root/build}
+[ "${AVE_SKIP_DEPS:-0}" = 1 ] || bash "$root/deploy/install-deps.sh"
+start=$(date +%s)
+AVE_BUILD_DIR=$build bash "$root/deploy/build.sh"
+echo "build: $(( $(date +%s) - start )) s"
+ctest --test-dir "$build" --output-on-failure -j "${AVE_TEST_JOBS:-2}"
+echo "build + tests: $(( $(date +%s) - start )) s"

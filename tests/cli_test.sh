@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Every executable answers --help (exit 0) and refuses a bad flag with a non-zero exit and a
+# one-line reason on stderr.
+set -u
+bin=$1
+fail=0
+# Each executable with its required arguments, so the bad flag is the only fault.
+declare -A args=([ave-server]="" [ave-agent]="--camera c --source sim:campus#cam1" [ave-viewer]="" [ave-admin]="list")
+for exe in ave-server ave-agent ave-viewer ave-admin; do
+  if ! "$bin/$exe" --help >/tmp/ave_cli_help.$$ 2>&1; then echo "FAIL $exe --help exited non-zero"; fail=1; fi
+  grep -q -- "--" /tmp/ave_cli_help.$$ || { echo "FAIL $exe --help printed no options"; fail=1; }
+  # shellcheck disable=SC2086
+  "$bin/$exe" ${args[$exe]} --no-such-flag >/tmp/ave_cli_out.$$ 2>/tmp/ave_cli_err.$$
+  rc=$?
+  lines=$(wc -l </tmp/ave_cli_err.$$)
+  if [ "$rc" -eq 0 ]; then echo "FAIL $exe accepted --no-such-flag"; fail=1; fi
+  if [ "$lines" -ne 1 ]; then echo "FAIL $exe printed $lines lines on stderr for a bad flag:"; cat /tmp/ave_cli_err.$$; fail=1; fi
+  grep -q "no-such-flag" /tmp/ave_cli_err.$$ || { echo "FAIL $exe did not name the bad flag"; fail=1; }
+  [ "$fail" = 0 ] && echo "ok   $exe: --help, bad flag -> exit $rc: $(cat /tmp/ave_cli_err.$$)"
+done
+rm -f /tmp/ave_cli_*.$$
+# Semantic errors also name what is wrong.
+out=$("$bin/ave-agent" --camera c --source ftp://x 2>&1); rc=$?
+if [ $rc -eq 0 ] || ! grep -q "unknown scheme" <<<"$out"; then echo "FAIL ave-agent bad source: rc=$rc $out"; fail=1; fi
+out=$("$bin/ave-server" --listen 127.0.0.1:0 --store /nonexistent-dir/x.db --admin-token t 2>&1); rc=$?
+if [ $rc -eq 0 ] || ! grep -q "/nonexistent-dir/x.db" <<<"$out"; then echo "FAIL ave-server bad store: rc=$rc $out"; fail=1; fi
+[ "$fail" = 0 ] && echo "cli: all checks passed"
+exit $fail

@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Runs deploy/demo.sh headless against this build and checks it produced a quad-view PNG of the
+# right size with all three cameras registered and streaming, and that it stopped everything.
+set -euo pipefail
+root=$1
+build=$2
+out=$(mktemp -d)
+trap 'rm -rf "$out"' EXIT
+AVE_SKIP_DEPS=1 AVE_SKIP_BUILD=1 AVE_BUILD_DIR=$build AVE_DEMO_OUT=$out AVE_DEMO_HEADLESS=1 AVE_DEMO_FPS=5 \
+  bash "$root/deploy/demo.sh"
+test -s "$out/quad.png" || { echo "FAIL: no quad.png"; exit 1; }
+python3 - "$out/quad.png" <<'PY'
+import struct, sys
+with open(sys.argv[1], 'rb') as f:
+    head = f.read(24)
+assert head[:8] == b'\x89PNG\r\n\x1a\n', 'not a PNG'
+w, h = struct.unpack('>II', head[16:24])
+assert (w, h) == (1280, 720), f'quad view is {w}x{h}, expected 1280x720'
+print(f'quad.png {w}x{h}')
+PY
+n=$(grep -c '"id"' "$out/cameras.json")
+[ "$n" = 3 ] || { echo "FAIL: $n cameras registered"; exit 1; }
+for cam in cam1 cam2 cam3; do
+  grep -q "camera '$cam' connected" "$out/server.log" || { echo "FAIL: $cam never connected"; exit 1; }
+done
+grep -q "ave-server stopped" "$out/server.log" || { echo "FAIL: server did not stop cleanly"; exit 1; }
+if pgrep -f "$out/ave.db" >/dev/null; then echo "FAIL: a demo process is still running"; exit 1; fi
+echo "demo: ok"

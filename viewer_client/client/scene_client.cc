@@ -1,0 +1,199 @@
+#include "viewer_client/client/scene_client.h"
+
+#include <grpcpp/grpcpp.h>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "absl/strings/str_cat.h"
+#include "ave/v1/ave.grpc.pb.h"
+#include "fusion_server/core/convert.h"
+#include "model_store/common/log.h"
+
+namespace ave::viewer {
+namespace {
+
+CameraLiveness FromProto(v1::CameraStatus s) {
+  switch (s) {
+    case v1::CAMERA_STATUS_LIVE: return CameraLiveness::kLive;
+    case v1::CAMERA_STATUS_STALE: return CameraLiveness::kStale;
+    case v1::CAMERA_STATUS_LOST: return CameraLiveness::kLost;
+    default: return CameraLiveness::kUnknown;
+  }
+}
+
+}  // namespace
+
+SceneClient::SceneClient(std::shared_ptr<grpc::Channel> channel, std::string viewer_token, std::string viewer_id)
+    : channel_(std::move(channel)), token_(std::move(viewer_token)), viewer_id_(std::move(viewer_id)) {}
+
+SceneClient::~SceneClient() { Stop(); }
+
+absl::StatusOr<TriangleMesh> SceneClient::FetchStaticModel(uint64_t* version) {
+  auto stub = v1::SceneService::NewStub(channel_);
+  grpc::ClientContext context;
+  context.AddMetadata("authorization", "Bearer " + token_);
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+  auto reader = stub->GetStaticModel(&context, v1::StaticModelRequest());
+  TriangleMesh mesh;
+  v1::StaticModelChunk chunk;
+  uint32_t expected = 0, count = 0;
+  while (reader->Read(&chunk)) {
+    if (chunk.chunk_index() != expected) {
+      return absl::DataLossError(absl::StrCat("static model: chunk ", chunk.chunk_index(), " arrived, expected ", expected));
+    }
+    const size_t n = chunk.positions_size() / 3;
+    if (chunk.positions_size() % 3 || chunk.normals_size() != chunk.positions_size() ||
+        chunk.colors_size() != chunk.positions_size() || chunk.indices_size() % 3) {
+      return absl::DataLossError(absl::StrCat("static model: chunk ", expected, " has inconsistent array sizes"));
+    }
+    const uint32_t base = static_cast<uint32_t>(mesh.positions.size());
+    for (size_t v = 0; v < n; ++v) {
+      mesh.positions.emplace_back(chunk.positions(3 * v), chunk.positions(3 * v + 1), chunk.positions(3 * v + 2));
+      mesh.normals.emplace_back(chunk.normals(3 * v), chunk.normals(3 * v + 1), chunk.normals(3 * v + 2));
+      mesh.colors.emplace_back(chunk.colors(3 * v), chunk.colors(3 * v + 1), chunk.colors(3 * v + 2));
+    }
+    for (uint32_t i : chunk.indices()) {
+      if (i >= n) return absl::DataLossError(absl::StrCat("static model: chunk ", expected, " index ", i, " out of range"));
+      mesh.indices.push_back(base + i);
+    }
+    mesh.origin = {chunk.origin().x(), chunk.origin().y(), chunk.origin().z()};
+    if (version) *version = chunk.version();
+    count = chunk.chunk_count();
+    ++expected;
+  }
+  const grpc::Status status = reader->Finish();
+  if (!status.ok()) {
+    return absl::Status(static_cast<absl::StatusCode>(status.error_code()),
+                        "static model: " + status.error_message());
+  }
+  if (expected != count) return absl::DataLossError(absl::StrCat("static model: ", expected, " of ", count, " chunks"));
+  mesh.triangle_material.assign(mesh.TriangleCount(), SurfaceMaterial::kTerrain);
+  mesh.triangle_object.assign(mesh.TriangleCount(), -1);
+  return mesh;
+}
+
+void SceneClient::Start(const SubscribeOptions& options) {
+  Stop();
+  stop_ = false;
+  thread_ = std::thread([this, options] { Loop(options); });
+}
+
+void SceneClient::Stop() {
+  stop_ = true;
+  {
+    std::lock_guard lock(mu_);
+    if (context_) static_cast<grpc::ClientContext*>(context_.get())->TryCancel();
+  }
+  if (thread_.joinable()) thread_.join();
+}
+
+std::vector<CameraView> SceneClient::Snapshot() const {
+  std::lock_guard lock(mu_);
+  std::vector<CameraView> out;
+  for (const auto& [id, cam] : cameras_) out.push_back(cam);
+  return out;
+}
+
+std::string SceneClient::last_error() const {
+  std::lock_guard lock(mu_);
+  return last_error_;
+}
+
+bool SceneClient::WaitUntil(const std::function<bool(const std::vector<CameraView>&)>& ready,
+                            std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (ready(Snapshot())) return true;
+    std::unique_lock lock(mu_);
+    changed_.wait_for(lock, std::chrono::milliseconds(50));
+  }
+  return ready(Snapshot());
+}
+
+void SceneClient::Loop(SubscribeOptions options) {
+  auto stub = v1::SceneService::NewStub(channel_);
+  auto backoff = std::chrono::milliseconds(200);
+  while (!stop_.load()) {
+    auto context = std::make_shared<grpc::ClientContext>();
+    context->AddMetadata("authorization", "Bearer " + token_);
+    {
+      std::lock_guard lock(mu_);
+      context_ = context;
+    }
+    v1::SubscribeRequest request;
+    request.set_viewer_id(viewer_id_);
+    for (const auto& id : options.camera_ids) request.add_camera_ids(id);
+    request.set_max_rate_hz(options.max_rate_hz);
+    request.set_include_jpeg(options.include_jpeg);
+    auto reader = stub->Subscribe(context.get(), request);
+    v1::SceneUpdate update;
+    while (reader->Read(&update)) {
+      if (stop_.load()) {
+        context->TryCancel();
+        break;
+      }
+      backoff = std::chrono::milliseconds(200);
+      std::map<std::string, std::shared_ptr<const DecodedImage>> decoded;
+      for (const auto& cam : update.cameras()) {  // decode outside the lock
+        if (cam.jpeg().empty()) continue;
+        const cv::Mat bytes(1, static_cast<int>(cam.jpeg().size()), CV_8UC1, const_cast<char*>(cam.jpeg().data()));
+        cv::Mat bgr = cv::imdecode(bytes, cv::IMREAD_COLOR);
+        if (bgr.empty()) {
+          AVE_LOG(WARNING) << "camera '" << cam.camera_id() << "': undecodable JPEG (frame " << cam.frame_sequence() << ")";
+          continue;
+        }
+        auto image = std::make_shared<DecodedImage>();
+        image->width = bgr.cols;
+        image->height = bgr.rows;
+        image->rgba.resize(size_t(bgr.cols) * bgr.rows * 4);
+        cv::Mat rgba(bgr.rows, bgr.cols, CV_8UC4, image->rgba.data());
+        cv::cvtColor(bgr, rgba, cv::COLOR_BGR2RGBA);
+        decoded[cam.camera_id()] = std::move(image);
+      }
+      {
+        std::lock_guard lock(mu_);
+        for (const auto& id : update.removed_camera_ids()) cameras_.erase(id);
+        for (const auto& cam : update.cameras()) {
+          CameraView& v = cameras_[cam.camera_id()];
+          v.id = cam.camera_id();
+          v.name = cam.name();
+          v.intrinsics = ave::FromProto(cam.intrinsics());
+          v.world_from_camera = ave::FromProto(cam.pose());
+          v.view = GetMatrix(cam.view_matrix());
+          v.projection = GetMatrix(cam.projection_matrix());
+          v.near_m = cam.near_m();
+          v.far_m = cam.far_m();
+          v.status = FromProto(cam.status());
+          v.frame_capture_time_ns = cam.frame_capture_time_ns();
+          v.frame_sequence = cam.frame_sequence();
+          if (auto it = decoded.find(cam.camera_id()); it != decoded.end()) {
+            v.image = it->second;
+            v.image_serial = next_serial_++;
+          }
+        }
+      }
+      ++updates_;
+      changed_.notify_all();
+    }
+    const grpc::Status status = reader->Finish();
+    {
+      std::lock_guard lock(mu_);
+      context_.reset();
+      last_error_ = status.error_message();
+    }
+    if (stop_.load()) break;
+    if (status.error_code() == grpc::StatusCode::UNAUTHENTICATED ||
+        status.error_code() == grpc::StatusCode::PERMISSION_DENIED) {
+      AVE_LOG(ERROR) << "viewer '" << viewer_id_ << "': refused: " << status.error_message();
+      break;
+    }
+    AVE_LOG(WARNING) << "viewer '" << viewer_id_ << "': subscription ended (" << status.error_message()
+                     << "); retrying in " << backoff.count() << " ms";
+    const auto until = std::chrono::steady_clock::now() + backoff;
+    while (!stop_.load() && std::chrono::steady_clock::now() < until) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    backoff = std::min(backoff * 2, std::chrono::milliseconds(5000));
+  }
+}
+
+}  // namespace ave::viewer

@@ -1,0 +1,52 @@
+#pragma once
+// The viewer application: connects to the server, renders the quad view (a free browse view plus
+// three views locked to chosen cameras, AVE §8) in a window or headless, and writes snapshots.
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "absl/status/status.h"
+#include "viewer_client/client/scene_client.h"
+#include "viewer_client/render/renderer.h"
+
+namespace ave::viewer {
+
+struct ViewerOptions {
+  std::string server = "127.0.0.1:50051";
+  std::string token;  // viewer bearer token
+  std::string viewer_id = "ave-viewer";
+  bool headless = false;
+  std::string snapshot_path;  // PNG written after the headless render, or on 'p' / close in a window
+  int width = 1280, height = 720;
+  std::string layout = "quad";               // "quad" or "browse" (browse view only)
+  std::vector<std::string> locked_cameras;   // up to 3 for the locked views; default: the first by id
+  std::vector<std::string> camera_filter;    // subscribe to these only (empty = all)
+  int wait_cameras = 0;                      // headless: wait until this many cameras have frames (0: all locked)
+  double timeout_s = 30;                     // headless: give up waiting after this long
+  float max_rate_hz = 30;
+  Eigen::Vector3d eye = Eigen::Vector3d(-150, -170, 130);  // browse view, local frame (m)
+  Eigen::Vector3d target = Eigen::Vector3d(0, 0, 0);
+  double browse_fov_deg = 55;
+  bool draw_frustums = true;
+
+  std::string Check() const;
+};
+
+// Runs until the window closes (window mode) or after one snapshot (headless).
+absl::Status RunViewer(const ViewerOptions& options);
+
+// Building blocks, shared with tests.
+// Projectors for the cameras that have a frame; images are referenced, not copied, so `cameras`
+// must outlive the call to Renderer::SetProjectors.
+std::vector<Projector> MakeProjectors(const std::vector<CameraView>& cameras);
+// A perspective view from `eye` towards `target` filling `viewport`.
+View BrowseView(const Viewport& viewport, const Eigen::Vector3d& eye, const Eigen::Vector3d& target, double fov_deg);
+// The quad layout: browse view top-left, then views locked to `locked` (ids of projectors).
+std::vector<View> QuadViews(int width, int height, const View& browse, const std::vector<Projector>& projectors,
+                            const std::vector<std::string>& locked);
+// Writes RGBA8 rows-top-first pixels as a PNG.
+absl::Status WritePng(const std::string& path, const std::vector<uint8_t>& rgba, int width, int height);
+
+}  // namespace ave::viewer
