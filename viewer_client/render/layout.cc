@@ -1,0 +1,54 @@
+// The GL-free parts of renderer.h: options, shading formula, viewport layout, camera-locked views.
+#include <algorithm>
+#include <cmath>
+
+#include "viewer_client/render/renderer.h"
+
+namespace ave::viewer {
+
+std::string RendererOptions::Check() const {
+  if (video_layer_width < 16 || video_layer_width > 4096) return "video_layer_width must be in 16..4096";
+  if (video_layer_height < 16 || video_layer_height > 4096) return "video_layer_height must be in 16..4096";
+  if (shadow_map_size < 64 || shadow_map_size > 8192) return "shadow_map_size must be in 64..8192";
+  if (!sun_direction.allFinite() || sun_direction.norm() < 1e-6f) return "sun_direction must be finite and non-zero";
+  if (!std::isfinite(ambient) || ambient < 0 || ambient > 1) return "ambient must be in [0, 1]";
+  if (!std::isfinite(diffuse) || diffuse < 0 || diffuse > 1) return "diffuse must be in [0, 1]";
+  if (!std::isfinite(frustum_depth_m) || frustum_depth_m <= 0) return "frustum_depth_m must be finite and > 0";
+  return {};
+}
+
+Eigen::Vector3f ShadedModelColor(const RendererOptions& options, const Eigen::Vector3f& color,
+                                 const Eigen::Vector3f& normal) {
+  const float lambert = std::max(normal.normalized().dot(options.sun_direction.normalized()), 0.0f);
+  return color * (options.ambient + options.diffuse * lambert);
+}
+
+std::array<Viewport, 4> QuadLayout(int width, int height) {
+  const int left_w = width / 2, right_w = width - left_w;
+  const int bottom_h = height / 2, top_h = height - bottom_h;
+  return {Viewport{0, bottom_h, left_w, top_h}, Viewport{left_w, bottom_h, right_w, top_h},
+          Viewport{0, 0, left_w, bottom_h}, Viewport{left_w, 0, right_w, bottom_h}};
+}
+
+View ViewLockedToProjector(const Projector& projector, const Viewport& viewport) {
+  View view;
+  view.viewport = viewport;
+  view.view = projector.view;
+  view.projection = projector.projection;
+  view.draw_frustums = false;
+  view.highlight_camera_id = projector.camera_id;
+  if (projector.image_width > 0 && projector.image_height > 0 && viewport.width > 0 && viewport.height > 0) {
+    const double image_aspect = static_cast<double>(projector.image_width) / projector.image_height;
+    const double viewport_aspect = static_cast<double>(viewport.width) / viewport.height;
+    // Scaling a row of the projection scales that NDC axis about the centre: the image's [-1, 1]
+    // rectangle shrinks to the part of the viewport with the image's aspect.
+    if (viewport_aspect > image_aspect) {
+      view.projection.row(0) *= image_aspect / viewport_aspect;
+    } else {
+      view.projection.row(1) *= viewport_aspect / image_aspect;
+    }
+  }
+  return view;
+}
+
+}  // namespace ave::viewer

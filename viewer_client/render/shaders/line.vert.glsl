@@ -1,0 +1,13 @@
+#version 330 core
+// Frustum wireframes, local frame.
+layout(location = 0) in vec3 a_position;
+layout(location = 1) in vec3 a_color;
+
+uniform mat4 u_clip_from_local;
+
+out vec3 v_color;
+
+void main() {
+  v_color = a_color;
+  gl_Position = u_clip_from_local * vec4(a_position, 1.0);
+}
