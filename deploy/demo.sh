@@ -54,7 +54,9 @@ echo "demo: 3 simulated camera agents streaming"
 
 if [ -n "${DISPLAY:-}" ] && [ "${AVE_DEMO_HEADLESS:-0}" != 1 ]; then
   echo "demo: opening the viewer window (close it to stop)"
-  "$bin/ave-viewer" --server "$server" --snapshot "$out/quad.png"
+  # Waits for the first frames so the window opens on live video.
+  sleep 2
+  "$bin/ave-viewer" --server "$server" --snapshot "$out/quad.png" --frames "${AVE_VIEWER_FRAMES:-0}"
 else
   echo "demo: no DISPLAY, rendering headless"
   "$bin/ave-viewer" --server "$server" --headless --snapshot "$out/quad.png" --wait-cameras 3 --timeout 60

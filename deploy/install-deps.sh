@@ -13,7 +13,7 @@ PACKAGES=(
   # rendering: GLFW window, headless EGL (Mesa llvmpipe), GL loader, math
   libglfw3-dev libglm-dev libepoxy-dev libegl-dev libgl-dev libgl1-mesa-dri libegl-mesa0 xvfb xauth
   # store
-  libsqlite3-dev libopenexr-dev
+  libsqlite3-dev libopenexr-dev libabsl-dev
   # command lines, JSON
   libcli11-dev nlohmann-json3-dev
   # tests and benchmarks

@@ -28,6 +28,7 @@ int main(int argc, char** argv) {
   app.add_option("--max-rate", options.max_rate_hz, "updates per second to ask for")->capture_default_str();
   app.add_option("--eye", eye, "browse view eye x,y,z (m, site frame)");
   app.add_option("--target", target, "browse view target x,y,z");
+  app.add_option("--frames", options.max_frames, "window: close after N frames (0 = when closed)");
   app.add_flag("!--no-frustums", options.draw_frustums, "do not draw camera frustums");
   try {
     app.parse(argc, argv);

@@ -52,6 +52,7 @@ std::string ViewerOptions::Check() const {
   if (!(timeout_s > 0)) return "timeout must be > 0";
   if (!(max_rate_hz > 0)) return "max rate must be > 0";
   if (!eye.allFinite() || !target.allFinite() || (eye - target).norm() < 1e-6) return "eye and target must differ";
+  if (max_frames < 0) return "frames must be >= 0";
   if (!(browse_fov_deg > 5 && browse_fov_deg < 170)) return "browse fov must be in (5, 170) degrees";
   return {};
 }
@@ -218,7 +219,9 @@ absl::Status RunViewer(const ViewerOptions& options) {
     if (absl::Status s = render_once(cams); !s.ok()) return s;
     if (absl::Status s = snapshot(); !s.ok()) return s;
   } else {
-    while (!window->ShouldClose()) {
+    int frames = 0;
+    while (!window->ShouldClose() && (options.max_frames == 0 || frames < options.max_frames)) {
+      ++frames;
       window->PollEvents();
       const WindowInput in = window->TakeInput();
       orbit.yaw -= 0.005 * in.left_drag_px.x();

@@ -30,6 +30,7 @@ struct ViewerOptions {
   Eigen::Vector3d target = Eigen::Vector3d(0, 0, 0);
   double browse_fov_deg = 55;
   bool draw_frustums = true;
+  int max_frames = 0;  // window: close after this many frames (0 = until the user closes it)
 
   std::string Check() const;
 };
