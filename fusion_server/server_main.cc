@@ -4,9 +4,9 @@
 #include <iostream>
 #include <thread>
 
-#include <CLI/CLI.hpp>
 
 #include "fusion_server/service/server.h"
+#include "model_store/common/cli.h"
 #include "model_store/common/log.h"
 
 namespace {
@@ -39,13 +39,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_flag("!--no-seed-campus", options.seed_campus, "do not store the built-in campus in an empty store");
   app.add_option("--log-level", log_level, "debug, info, warning or error")->check(CLI::IsMember({"debug", "info", "warning", "error"}));
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    if (e.get_exit_code() == 0) return app.exit(e);
-    std::cerr << "ave-server: " << e.what() << " (see --help)\n";
-    return 2;
-  }
+  if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-server")) return *exit_code;
   ave::log::MinLevel() = log_level == "debug" ? ave::log::Level::kDEBUG
                          : log_level == "warning" ? ave::log::Level::kWARNING
                          : log_level == "error"   ? ave::log::Level::kERROR

@@ -6,8 +6,7 @@
 #include <sstream>
 #include <thread>
 
-#include <CLI/CLI.hpp>
-
+#include "model_store/common/cli.h"
 #include "model_store/common/log.h"
 #include "sensor_agent/stream/agent_streamer.h"
 
@@ -37,25 +36,14 @@ int main(int argc, char** argv) {
   app.add_option("--position", position, "mounting position x,y,z (m, site frame) for sources without a pose");
   app.add_option("--look-at", look_at, "point x,y,z the mounted camera looks at");
   app.add_option("--fov", fov_deg, "horizontal field of view (deg) for sources without intrinsics")->capture_default_str();
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    if (e.get_exit_code() == 0) return app.exit(e);
-    std::cerr << "ave-agent: " << e.what() << " (see --help)\n";
-    return 2;
-  }
+  if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-agent")) return *exit_code;
   if (position.empty() != look_at.empty()) {
     std::cerr << "ave-agent: --position and --look-at go together\n";
     return 2;
   }
   if (!position.empty()) {
-    auto parse = [](const std::string& s, Eigen::Vector3d& v) {
-      std::stringstream ss(s);
-      char a = 0, b = 0;
-      return static_cast<bool>(ss >> v.x() >> a >> v.y() >> b >> v.z()) && a == ',' && b == ',';
-    };
     Eigen::Vector3d eye, target;
-    if (!parse(position, eye) || !parse(look_at, target)) {
+    if (!ave::cli::ParseVec3(position, eye) || !ave::cli::ParseVec3(look_at, target)) {
       std::cerr << "ave-agent: --position/--look-at must be x,y,z\n";
       return 2;
     }

@@ -5,8 +5,7 @@
 #include <iostream>
 #include <sstream>
 
-#include <CLI/CLI.hpp>
-
+#include "model_store/common/cli.h"
 #include "viewer_client/client/viewer_app.h"
 
 int main(int argc, char** argv) {
@@ -30,23 +29,12 @@ int main(int argc, char** argv) {
   app.add_option("--target", target, "browse view target x,y,z");
   app.add_option("--frames", options.max_frames, "window: close after N frames (0 = when closed)");
   app.add_flag("!--no-frustums", options.draw_frustums, "do not draw camera frustums");
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    if (e.get_exit_code() == 0) return app.exit(e);
-    std::cerr << "ave-viewer: " << e.what() << " (see --help)\n";
-    return 2;
-  }
-  auto parse3 = [](const std::string& s, Eigen::Vector3d& v) {
-    std::stringstream ss(s);
-    char a = 0, b = 0;
-    return static_cast<bool>(ss >> v.x() >> a >> v.y() >> b >> v.z()) && a == ',' && b == ',';
-  };
-  if (!eye.empty() && !parse3(eye, options.eye)) {
+  if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-viewer")) return *exit_code;
+  if (!eye.empty() && !ave::cli::ParseVec3(eye, options.eye)) {
     std::cerr << "ave-viewer: --eye must be x,y,z\n";
     return 2;
   }
-  if (!target.empty() && !parse3(target, options.target)) {
+  if (!target.empty() && !ave::cli::ParseVec3(target, options.target)) {
     std::cerr << "ave-viewer: --target must be x,y,z\n";
     return 2;
   }

@@ -8,20 +8,14 @@
 #include <iostream>
 #include <sstream>
 
-#include <CLI/CLI.hpp>
 #include <google/protobuf/util/json_util.h>
 #include <nlohmann/json.hpp>
 
 #include "fusion_server/admin/admin_client.h"
 #include "fusion_server/core/convert.h"
+#include "model_store/common/cli.h"
 
 namespace {
-
-bool ParseVec3(const std::string& text, Eigen::Vector3d& out) {
-  std::stringstream ss(text);
-  char c1 = 0, c2 = 0;
-  return static_cast<bool>(ss >> out.x() >> c1 >> out.y() >> c2 >> out.z()) && c1 == ',' && c2 == ',' && ss.eof();
-}
 
 int Fail(const std::string& what) {
   std::cerr << "ave-admin: " << what << "\n";
@@ -62,13 +56,7 @@ int main(int argc, char** argv) {
   remove->add_option("--id", id, "camera id")->required();
   app.add_subcommand("import-campus", "register the built-in campus cameras (existing ids are skipped)");
 
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    if (e.get_exit_code() == 0) return app.exit(e);
-    std::cerr << "ave-admin: " << e.what() << " (see --help)\n";
-    return 2;
-  }
+  if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-admin")) return *exit_code;
   ave::AdminClient client(grpc::CreateChannel(server, grpc::InsecureChannelCredentials()), token);
 
   if (app.got_subcommand("list")) {
@@ -109,10 +97,10 @@ int main(int argc, char** argv) {
   std::stringstream ss(size);
   if (!(ss >> width >> x >> height) || x != 'x') return Fail("--size must be WIDTHxHEIGHT, got '" + size + "'");
   Eigen::Vector3d eye, target;
-  if (!ParseVec3(position, eye)) return Fail("--position must be x,y,z, got '" + position + "'");
+  if (!ave::cli::ParseVec3(position, eye)) return Fail("--position must be x,y,z, got '" + position + "'");
   ave::Rigid3d pose;
   if (!look_at.empty()) {
-    if (!ParseVec3(look_at, target)) return Fail("--look-at must be x,y,z, got '" + look_at + "'");
+    if (!ave::cli::ParseVec3(look_at, target)) return Fail("--look-at must be x,y,z, got '" + look_at + "'");
     pose = ave::LookAt(eye, target);
   } else if (!quaternion.empty()) {
     std::stringstream qs(quaternion);

@@ -1,0 +1,36 @@
+#pragma once
+// Shared command-line conventions of the ave-* executables (only their mains include this):
+// --help exits 0, a bad flag exits 2 with one line naming it, and "x,y,z" triples parse strictly.
+#include <iostream>
+#include <optional>
+#include <sstream>
+#include <string>
+
+#include <CLI/CLI.hpp>
+#include <Eigen/Core>
+
+namespace ave::cli {
+
+// Parses argv; returns an exit code when the program should stop now (help shown: 0, error: 2).
+inline std::optional<int> Parse(CLI::App& app, int argc, char** argv, const std::string& program) {
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    if (e.get_exit_code() == 0) return app.exit(e);
+    std::cerr << program << ": " << e.what() << " (see --help)\n";
+    return 2;
+  }
+  return std::nullopt;
+}
+
+// "x,y,z" (metres, site frame) -> a vector; false on any other shape.
+inline bool ParseVec3(const std::string& text, Eigen::Vector3d& out) {
+  std::stringstream ss(text);
+  char c1 = 0, c2 = 0;
+  double x, y, z;
+  if (!(ss >> x >> c1 >> y >> c2 >> z) || c1 != ',' || c2 != ',' || !(ss >> std::ws).eof()) return false;
+  out = {x, y, z};
+  return true;
+}
+
+}  // namespace ave::cli
