@@ -15,7 +15,7 @@ PACKAGES=(
   # store
   libsqlite3-dev libopenexr-dev libabsl-dev
   # command lines, JSON
-  libcli11-dev nlohmann-json3-dev
+  libcli11-dev nlohmann-json3-dev libyaml-cpp-dev
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
 )

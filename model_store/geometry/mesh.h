@@ -10,7 +10,7 @@
 namespace ave {
 
 // What a triangle is made of; the simulator paints by material, the viewer ignores it.
-enum class SurfaceMaterial : uint8_t { kTerrain = 0, kRoad = 1, kWall = 2, kRoof = 3, kObject = 4 };
+enum class SurfaceMaterial : uint8_t { kTerrain = 0, kRoad = 1, kWall = 2, kRoof = 3, kObject = 4, kVegetation = 5 };
 
 struct TriangleMesh {
   Eigen::Vector3d origin = Eigen::Vector3d::Zero();  // world coordinates of the local zero

@@ -235,4 +235,33 @@ MoverState MoverAt(const SyntheticCampus& campus, const Mover& mover, double t_s
   return state;
 }
 
+Rigid3d CameraPoseAt(const SyntheticCampus& campus, const CameraSpec& camera, double t_s) {
+  if (!camera.path || camera.path->waypoints_m.size() < 2) return camera.world_from_camera;
+  const CameraPath& path = *camera.path;
+  double length = 0;
+  for (size_t i = 0; i + 1 < path.waypoints_m.size(); ++i) length += (path.waypoints_m[i + 1] - path.waypoints_m[i]).norm();
+  if (!(length > 0)) return camera.world_from_camera;
+  // Ping-pong along the polyline: s in [0, 2 length) folds back onto [0, length].
+  double s = std::fmod(path.speed_mps * t_s, 2 * length);
+  if (s < 0) s += 2 * length;
+  const bool returning = s > length;
+  if (returning) s = 2 * length - s;
+  Eigen::Vector2d p = path.waypoints_m.back(), dir = Eigen::Vector2d::UnitX();
+  for (size_t i = 0; i + 1 < path.waypoints_m.size(); ++i) {
+    const Eigen::Vector2d a = path.waypoints_m[i], b = path.waypoints_m[i + 1];
+    const double len = (b - a).norm();
+    if (s <= len || i + 2 == path.waypoints_m.size()) {
+      dir = len > 0 ? Eigen::Vector2d((b - a) / len) : Eigen::Vector2d::UnitX();
+      p = a + std::min(s, len) * dir;
+      break;
+    }
+    s -= len;
+  }
+  if (returning) dir = -dir;
+  const Eigen::Vector3d eye(p.x(), p.y(), campus.TerrainHeight(p.x(), p.y()) + path.height_m);
+  const double pitch = path.pitch_deg * M_PI / 180;
+  const Eigen::Vector3d forward(std::cos(pitch) * dir.x(), std::cos(pitch) * dir.y(), -std::sin(pitch));
+  return LookAt(eye, eye + forward);
+}
+
 }  // namespace ave::scene

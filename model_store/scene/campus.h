@@ -26,11 +26,21 @@ struct BoxBuilding {
   double height_m = 10;                              // roof above the highest ground at the footprint
 };
 
+// A camera carried along a path (e.g. a backpack camera): it walks the polyline at constant speed
+// at `height_m` above the terrain, looking ahead along the path and `pitch_deg` below horizontal.
+struct CameraPath {
+  std::vector<Eigen::Vector2d> waypoints_m;  // open polyline, walked back and forth (ping-pong)
+  double speed_mps = 1.4;
+  double height_m = 1.7;
+  double pitch_deg = 10;
+};
+
 struct CameraSpec {
   std::string id;
   std::string name;
   PinholeIntrinsics intrinsics;
-  Rigid3d world_from_camera;  // local frame
+  Rigid3d world_from_camera;  // local frame; the pose at t = 0 for a moving camera
+  std::optional<CameraPath> path;  // set: a moving camera
 };
 
 enum class MoverKind : uint8_t { kPerson = 0, kCar = 1 };
@@ -82,6 +92,9 @@ TriangleMesh BuildStaticMesh(const SyntheticCampus& campus, double grid_resoluti
 
 // Where a mover is at time t (seconds since the scenario start); t may be negative.
 MoverState MoverAt(const SyntheticCampus& campus, const Mover& mover, double t_s);
+
+// A camera's true pose at time t: its mounting pose, or its place on its path.
+Rigid3d CameraPoseAt(const SyntheticCampus& campus, const CameraSpec& camera, double t_s);
 
 // Corners of a box footprint (counter-clockwise), local frame.
 std::vector<Eigen::Vector2d> FootprintCorners(const BoxBuilding& b);
