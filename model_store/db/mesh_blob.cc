@@ -68,7 +68,7 @@ std::string CheckMesh(const TriangleMesh& m) {
                                   " is out of range (" + std::to_string(n) + " positions)";
   }
   for (SurfaceMaterial s : m.triangle_material) {
-    if (static_cast<uint8_t>(s) > static_cast<uint8_t>(SurfaceMaterial::kObject)) return "unknown triangle_material";
+    if (static_cast<uint8_t>(s) > static_cast<uint8_t>(SurfaceMaterial::kVegetation)) return "unknown triangle_material";
   }
   return {};
 }
@@ -135,7 +135,7 @@ absl::StatusOr<TriangleMesh> DecodeMesh(std::string_view blob, std::string_view 
   for (SurfaceMaterial& s : m.triangle_material) {
     uint8_t u = 0;
     r.Get(u);
-    if (u > static_cast<uint8_t>(SurfaceMaterial::kObject)) return loss("has unknown material " + std::to_string(u));
+    if (u > static_cast<uint8_t>(SurfaceMaterial::kVegetation)) return loss("has unknown material " + std::to_string(u));
     s = static_cast<SurfaceMaterial>(u);
   }
   m.triangle_object.resize(no);

@@ -7,73 +7,354 @@
 namespace ave::scene {
 namespace {
 
-const Eigen::Vector3f kTerrainColor(0.56f, 0.60f, 0.50f);
-const Eigen::Vector3f kRoadColor(0.47f, 0.47f, 0.46f);
-const Eigen::Vector3f kWallColor(0.78f, 0.76f, 0.72f);
-const Eigen::Vector3f kRoofColor(0.62f, 0.58f, 0.55f);
+using Eigen::Vector2d;
+using Eigen::Vector3d;
+using Eigen::Vector3f;
 
-Eigen::Vector2d ToBuildingFrame(const BoxBuilding& b, double x, double y) {
+const Vector3f kTerrainColor(0.56f, 0.60f, 0.50f);
+const Vector3f kRoadColor(0.47f, 0.47f, 0.46f);
+const Vector3f kWallColor(0.78f, 0.76f, 0.72f);
+const Vector3f kRoofColor(0.62f, 0.58f, 0.55f);
+const Vector3f kTrunkColor(0.40f, 0.30f, 0.20f);
+const Vector3f kCrownColor(0.30f, 0.48f, 0.24f);
+
+constexpr int kRoundSegments = 48;
+constexpr int kDomeRings = 12;
+
+// Coordinates of (x, y) in a part's own frame.
+Vector2d ToPartFrame(const BuildingPart& b, double x, double y) {
   const double c = std::cos(b.yaw_rad), s = std::sin(b.yaw_rad);
   const double dx = x - b.center_m.x(), dy = y - b.center_m.y();
   return {c * dx + s * dy, -s * dx + c * dy};
 }
 
-CameraSpec MakeCamera(const SyntheticCampus& campus, std::string id, std::string name, Eigen::Vector2d eye_xy,
-                      double mast_m, Eigen::Vector2d target_xy) {
-  CameraSpec cam;
-  cam.id = std::move(id);
-  cam.name = std::move(name);
-  cam.intrinsics = PinholeIntrinsics::FromFov(640, 480, 70);
-  const Eigen::Vector3d eye(eye_xy.x(), eye_xy.y(), campus.TerrainHeight(eye_xy.x(), eye_xy.y()) + mast_m);
-  const Eigen::Vector3d target(target_xy.x(), target_xy.y(), campus.TerrainHeight(target_xy.x(), target_xy.y()));
-  cam.world_from_camera = LookAt(eye, target);
-  return cam;
+bool IsRound(PrimitiveKind k) { return k == PrimitiveKind::kCylinder || k == PrimitiveKind::kDome; }
+
+// Builds one building part's faces. Every triangle gets its own three vertices with its flat
+// normal, oriented away from the part's interior.
+class PartMesher {
+ public:
+  PartMesher(TriangleMesh& mesh, const BuildingPart& part, double base_z, double eave_z, int32_t object)
+      : mesh_(mesh), part_(part), z0_(base_z), ze_(eave_z), zt_(eave_z + part.roof_height_m), object_(object) {
+    const double c = std::cos(part.yaw_rad), s = std::sin(part.yaw_rad);
+    ax_ = Vector3d(c, s, 0);
+    ay_ = Vector3d(-s, c, 0);
+    interior_ = Vector3d(part.center_m.x(), part.center_m.y(), 0.5 * (z0_ + ze_));
+  }
+
+  void Mesh() {
+    const double hx = 0.5 * part_.size_m.x(), hy = 0.5 * part_.size_m.y();
+    switch (part_.kind) {
+      case PrimitiveKind::kBox: {
+        Walls({{-hx, -hy}, {hx, -hy}, {hx, hy}, {-hx, hy}});
+        Roof({P(-hx, -hy, ze_), P(hx, -hy, ze_), P(hx, hy, ze_), P(-hx, hy, ze_)});
+        break;
+      }
+      case PrimitiveKind::kGable: {
+        Wall({P(-hx, -hy, z0_), P(hx, -hy, z0_), P(hx, -hy, ze_), P(-hx, -hy, ze_)});
+        Wall({P(hx, hy, z0_), P(-hx, hy, z0_), P(-hx, hy, ze_), P(hx, hy, ze_)});
+        for (double sx : {-hx, hx}) Wall({P(sx, -hy, z0_), P(sx, hy, z0_), P(sx, hy, ze_), P(sx, 0, zt_), P(sx, -hy, ze_)});
+        Roof({P(-hx, -hy, ze_), P(hx, -hy, ze_), P(hx, 0, zt_), P(-hx, 0, zt_)});
+        Roof({P(hx, hy, ze_), P(-hx, hy, ze_), P(-hx, 0, zt_), P(hx, 0, zt_)});
+        break;
+      }
+      case PrimitiveKind::kShed: {
+        Wall({P(-hx, -hy, z0_), P(hx, -hy, z0_), P(hx, -hy, ze_), P(-hx, -hy, ze_)});
+        Wall({P(hx, hy, z0_), P(-hx, hy, z0_), P(-hx, hy, zt_), P(hx, hy, zt_)});
+        for (double sx : {-hx, hx}) Wall({P(sx, -hy, z0_), P(sx, hy, z0_), P(sx, hy, zt_), P(sx, -hy, ze_)});
+        Roof({P(-hx, -hy, ze_), P(hx, -hy, ze_), P(hx, hy, zt_), P(-hx, hy, zt_)});
+        break;
+      }
+      case PrimitiveKind::kHip: {
+        Walls({{-hx, -hy}, {hx, -hy}, {hx, hy}, {-hx, hy}});
+        // Ridge along the longer axis; the four slopes share one pitch (rise over the shorter half).
+        if (hx >= hy) {
+          const double r = hx - hy;
+          Roof({P(-hx, -hy, ze_), P(hx, -hy, ze_), P(r, 0, zt_), P(-r, 0, zt_)});
+          Roof({P(hx, hy, ze_), P(-hx, hy, ze_), P(-r, 0, zt_), P(r, 0, zt_)});
+          Roof({P(hx, -hy, ze_), P(hx, hy, ze_), P(r, 0, zt_)});
+          Roof({P(-hx, hy, ze_), P(-hx, -hy, ze_), P(-r, 0, zt_)});
+        } else {
+          const double r = hy - hx;
+          Roof({P(hx, -hy, ze_), P(hx, hy, ze_), P(0, r, zt_), P(0, -r, zt_)});
+          Roof({P(-hx, hy, ze_), P(-hx, -hy, ze_), P(0, -r, zt_), P(0, r, zt_)});
+          Roof({P(-hx, -hy, ze_), P(hx, -hy, ze_), P(0, -r, zt_)});
+          Roof({P(hx, hy, ze_), P(-hx, hy, ze_), P(0, r, zt_)});
+        }
+        break;
+      }
+      case PrimitiveKind::kCylinder:
+      case PrimitiveKind::kDome: {
+        std::vector<Vector2d> ring;
+        for (int i = 0; i < kRoundSegments; ++i) {
+          const double a = 2 * M_PI * i / kRoundSegments;
+          ring.emplace_back(hx * std::cos(a), hy * std::sin(a));
+        }
+        Walls(ring);
+        const Vector3d centre = P(0, 0, ze_);
+        if (part_.kind == PrimitiveKind::kCylinder || !(part_.roof_height_m > 0)) {
+          for (int i = 0; i < kRoundSegments; ++i) {
+            const Vector2d& a = ring[i];
+            const Vector2d& b = ring[(i + 1) % kRoundSegments];
+            Roof({centre, P(a.x(), a.y(), ze_), P(b.x(), b.y(), ze_)});
+          }
+          break;
+        }
+        auto dome = [&](int i, int k) {  // ring point i at elevation step k (k = kDomeRings: apex)
+          const double phi = 0.5 * M_PI * k / kDomeRings, a = 2 * M_PI * i / kRoundSegments;
+          if (k == kDomeRings) return P(0, 0, zt_);
+          return P(hx * std::cos(phi) * std::cos(a), hy * std::cos(phi) * std::sin(a), ze_ + part_.roof_height_m * std::sin(phi));
+        };
+        for (int k = 0; k < kDomeRings; ++k) {
+          for (int i = 0; i < kRoundSegments; ++i) {
+            const int j = (i + 1) % kRoundSegments;
+            if (k + 1 == kDomeRings) {
+              Roof({dome(i, k), dome(j, k), dome(i, k + 1)});
+            } else {
+              Roof({dome(i, k), dome(j, k), dome(j, k + 1)});
+              Roof({dome(i, k), dome(j, k + 1), dome(i, k + 1)});
+            }
+          }
+        }
+        break;
+      }
+    }
+  }
+
+ private:
+  Vector3d P(double px, double py, double z) const {
+    const Vector3d xy = Vector3d(part_.center_m.x(), part_.center_m.y(), 0) + px * ax_ + py * ay_;
+    return {xy.x(), xy.y(), z};
+  }
+  // Vertical walls along a closed footprint polygon (part frame), base to eaves.
+  void Walls(const std::vector<Vector2d>& footprint) {
+    for (size_t i = 0; i < footprint.size(); ++i) {
+      const Vector2d& a = footprint[i];
+      const Vector2d& b = footprint[(i + 1) % footprint.size()];
+      Wall({P(a.x(), a.y(), z0_), P(b.x(), b.y(), z0_), P(b.x(), b.y(), ze_), P(a.x(), a.y(), ze_)});
+    }
+  }
+  void Wall(const std::vector<Vector3d>& polygon) { Polygon(polygon, kWallColor, SurfaceMaterial::kWall); }
+  void Roof(const std::vector<Vector3d>& polygon) { Polygon(polygon, kRoofColor, SurfaceMaterial::kRoof); }
+
+  // A planar convex polygon as a fan; reversed when its normal faces the part's interior.
+  void Polygon(std::vector<Vector3d> polygon, const Vector3f& color, SurfaceMaterial material) {
+    Vector3d normal = Vector3d::Zero(), centroid = Vector3d::Zero();
+    for (size_t i = 0; i < polygon.size(); ++i) {
+      const Vector3d& a = polygon[i];
+      const Vector3d& b = polygon[(i + 1) % polygon.size()];
+      normal += Vector3d((a.y() - b.y()) * (a.z() + b.z()), (a.z() - b.z()) * (a.x() + b.x()), (a.x() - b.x()) * (a.y() + b.y()));
+      centroid += a;
+    }
+    centroid /= static_cast<double>(polygon.size());
+    if (!(normal.norm() > 1e-12)) return;  // degenerate (e.g. a zero-height wall)
+    if (normal.dot(centroid - interior_) < 0) {
+      std::reverse(polygon.begin(), polygon.end());
+      normal = -normal;
+    }
+    const Vector3f n = normal.normalized().cast<float>();
+    for (size_t i = 1; i + 1 < polygon.size(); ++i) {
+      const uint32_t first = static_cast<uint32_t>(mesh_.positions.size());
+      for (const Vector3d* p : {&polygon[0], &polygon[i], &polygon[i + 1]}) {
+        mesh_.positions.push_back(p->cast<float>());
+        mesh_.normals.push_back(n);
+        mesh_.colors.push_back(color);
+      }
+      mesh_.indices.insert(mesh_.indices.end(), {first, first + 1, first + 2});
+      mesh_.triangle_material.push_back(material);
+      mesh_.triangle_object.push_back(object_);
+    }
+  }
+
+  TriangleMesh& mesh_;
+  const BuildingPart& part_;
+  double z0_, ze_, zt_;
+  int32_t object_;
+  Vector3d ax_, ay_, interior_;
+};
+
+// An upright prism (n sides, elliptic radii rx, ry) from z0 to z1 with a flat top; flat normals.
+void AppendPrism(TriangleMesh& mesh, const Vector2d& centre, double rx, double ry, double z0, double z1, int sides,
+                 const Vector3f& color, SurfaceMaterial material, bool top) {
+  auto add = [&](const Vector3d& a, const Vector3d& b, const Vector3d& c) {
+    const Vector3f n = (b - a).cross(c - a).normalized().cast<float>();
+    const uint32_t first = static_cast<uint32_t>(mesh.positions.size());
+    for (const Vector3d* p : {&a, &b, &c}) {
+      mesh.positions.push_back(p->cast<float>());
+      mesh.normals.push_back(n);
+      mesh.colors.push_back(color);
+    }
+    mesh.indices.insert(mesh.indices.end(), {first, first + 1, first + 2});
+    mesh.triangle_material.push_back(material);
+    mesh.triangle_object.push_back(-1);
+  };
+  for (int i = 0; i < sides; ++i) {
+    const double a0 = 2 * M_PI * i / sides, a1 = 2 * M_PI * (i + 1) / sides;
+    const Vector3d p0(centre.x() + rx * std::cos(a0), centre.y() + ry * std::sin(a0), z0);
+    const Vector3d p1(centre.x() + rx * std::cos(a1), centre.y() + ry * std::sin(a1), z0);
+    const Vector3d q0(p0.x(), p0.y(), z1), q1(p1.x(), p1.y(), z1);
+    add(p0, p1, q1);
+    add(p0, q1, q0);
+    if (top) add(Vector3d(centre.x(), centre.y(), z1), q0, q1);
+  }
+}
+
+double DistanceToSegment(const Vector2d& p, const Vector2d& a, const Vector2d& b, double* t_along) {
+  const Vector2d ab = b - a;
+  const double len2 = ab.squaredNorm();
+  const double t = len2 > 0 ? std::clamp((p - a).dot(ab) / len2, 0.0, 1.0) : 0.0;
+  *t_along = t * std::sqrt(len2);
+  return (p - (a + t * ab)).norm();
 }
 
 }  // namespace
 
+const char* PrimitiveName(PrimitiveKind kind) {
+  switch (kind) {
+    case PrimitiveKind::kBox: return "box";
+    case PrimitiveKind::kGable: return "gable";
+    case PrimitiveKind::kShed: return "shed";
+    case PrimitiveKind::kHip: return "hip";
+    case PrimitiveKind::kCylinder: return "cylinder";
+    case PrimitiveKind::kDome: return "dome";
+  }
+  return "unknown";
+}
+
+std::vector<BuildingPart> BoxBuilding::Parts() const {
+  std::vector<BuildingPart> parts{static_cast<const BuildingPart&>(*this)};
+  parts.insert(parts.end(), extra_parts.begin(), extra_parts.end());
+  return parts;
+}
+
 double SyntheticCampus::TerrainHeight(double x, double y) const {
-  return 1.2 * std::sin(x / 35.0) * std::cos(y / 50.0) + 0.015 * x + 0.01 * y;
+  if (terrain.kind == Terrain::Kind::kGrid && terrain.grid_cols >= 2 && terrain.grid_rows >= 2 &&
+      terrain.heights_m.size() == static_cast<size_t>(terrain.grid_cols) * terrain.grid_rows) {
+    const double gx = std::clamp((x - terrain.grid_origin_m.x()) / terrain.grid_spacing_m, 0.0, terrain.grid_cols - 1.0);
+    const double gy = std::clamp((y - terrain.grid_origin_m.y()) / terrain.grid_spacing_m, 0.0, terrain.grid_rows - 1.0);
+    if (!std::isfinite(gx) || !std::isfinite(gy)) return 0;
+    const int c = std::min(static_cast<int>(gx), terrain.grid_cols - 2), r = std::min(static_cast<int>(gy), terrain.grid_rows - 2);
+    const double fx = gx - c, fy = gy - r;
+    auto h = [&](int cc, int rr) { return terrain.heights_m[static_cast<size_t>(rr) * terrain.grid_cols + cc]; };
+    return (1 - fy) * ((1 - fx) * h(c, r) + fx * h(c + 1, r)) + fy * ((1 - fx) * h(c, r + 1) + fx * h(c + 1, r + 1));
+  }
+  const Terrain& t = terrain;
+  return t.amplitude_m * std::sin(x / t.length_x_m) * std::cos(y / t.length_y_m) + t.tilt_x * x + t.tilt_y * y;
 }
 
 Eigen::Vector3d SyntheticCampus::TerrainNormal(double x, double y) const {
-  const double dhdx = 1.2 / 35.0 * std::cos(x / 35.0) * std::cos(y / 50.0) + 0.015;
-  const double dhdy = -1.2 / 50.0 * std::sin(x / 35.0) * std::sin(y / 50.0) + 0.01;
-  return Eigen::Vector3d(-dhdx, -dhdy, 1.0).normalized();
+  double dhdx = 0, dhdy = 0;
+  if (terrain.kind == Terrain::Kind::kGrid) {
+    const double d = 0.25 * terrain.grid_spacing_m;
+    dhdx = (TerrainHeight(x + d, y) - TerrainHeight(x - d, y)) / (2 * d);
+    dhdy = (TerrainHeight(x, y + d) - TerrainHeight(x, y - d)) / (2 * d);
+  } else {
+    const Terrain& t = terrain;
+    dhdx = t.amplitude_m / t.length_x_m * std::cos(x / t.length_x_m) * std::cos(y / t.length_y_m) + t.tilt_x;
+    dhdy = -t.amplitude_m / t.length_y_m * std::sin(x / t.length_x_m) * std::sin(y / t.length_y_m) + t.tilt_y;
+  }
+  const Vector3d n(-dhdx, -dhdy, 1.0);
+  return n.allFinite() ? Vector3d(n.normalized()) : Vector3d::UnitZ();
 }
 
-bool SyntheticCampus::IsRoad(double x, double y) const {
-  return std::abs(x) <= road_half_width_m || std::abs(y) <= road_half_width_m;
+std::optional<RoadPoint> SyntheticCampus::RoadAt(double x, double y) const {
+  std::optional<RoadPoint> best;
+  int covering = 0;
+  const Vector2d p(x, y);
+  for (const Road& road : roads) {
+    double along_start = 0;
+    std::optional<RoadPoint> on_this;
+    for (size_t i = 0; i + 1 < road.points_m.size(); ++i) {
+      double t = 0;
+      const double d = DistanceToSegment(p, road.points_m[i], road.points_m[i + 1], &t);
+      if (d <= road.half_width_m && (!on_this || d < on_this->across_m)) on_this = RoadPoint{d, along_start + t, road.half_width_m, false};
+      along_start += (road.points_m[i + 1] - road.points_m[i]).norm();
+    }
+    if (!on_this) continue;
+    ++covering;
+    if (!best || on_this->across_m < best->across_m) best = on_this;
+  }
+  if (best) best->crossing = covering > 1;
+  return best;
+}
+
+bool SyntheticCampus::IsRoad(double x, double y) const { return RoadAt(x, y).has_value(); }
+
+bool PartCovers(const BuildingPart& part, double x, double y) {
+  const Vector2d p = ToPartFrame(part, x, y);
+  const double hx = 0.5 * part.size_m.x(), hy = 0.5 * part.size_m.y();
+  if (IsRound(part.kind)) return (p.x() / hx) * (p.x() / hx) + (p.y() / hy) * (p.y() / hy) <= 1.0;
+  return std::abs(p.x()) <= hx && std::abs(p.y()) <= hy;
 }
 
 int SyntheticCampus::BuildingAt(double x, double y) const {
   for (size_t i = 0; i < buildings.size(); ++i) {
-    const Eigen::Vector2d p = ToBuildingFrame(buildings[i], x, y);
-    if (std::abs(p.x()) <= 0.5 * buildings[i].size_m.x() && std::abs(p.y()) <= 0.5 * buildings[i].size_m.y()) {
-      return static_cast<int>(i);
-    }
+    if (PartCovers(buildings[i], x, y)) return static_cast<int>(i);
+    for (const BuildingPart& part : buildings[i].extra_parts)
+      if (PartCovers(part, x, y)) return static_cast<int>(i);
   }
   return -1;
 }
 
-std::vector<Eigen::Vector2d> FootprintCorners(const BoxBuilding& b) {
+std::vector<Eigen::Vector2d> FootprintCorners(const BuildingPart& b) {
   const double c = std::cos(b.yaw_rad), s = std::sin(b.yaw_rad);
-  const Eigen::Vector2d ax(c, s), ay(-s, c);
+  const Vector2d ax(c, s), ay(-s, c);
   const double hx = 0.5 * b.size_m.x(), hy = 0.5 * b.size_m.y();
   return {b.center_m - hx * ax - hy * ay, b.center_m + hx * ax - hy * ay, b.center_m + hx * ax + hy * ay,
           b.center_m - hx * ax + hy * ay};
 }
 
 double SyntheticCampus::BuildingBase(const BoxBuilding& b) const {
-  double lowest = TerrainHeight(b.center_m.x(), b.center_m.y());
-  for (const auto& c : FootprintCorners(b)) lowest = std::min(lowest, TerrainHeight(c.x(), c.y()));
+  double lowest = std::numeric_limits<double>::infinity();
+  for (const BuildingPart& part : b.Parts()) {
+    lowest = std::min(lowest, TerrainHeight(part.center_m.x(), part.center_m.y()));
+    for (const auto& c : FootprintCorners(part)) lowest = std::min(lowest, TerrainHeight(c.x(), c.y()));
+  }
   return lowest - 0.5;  // sunk in so no gap shows on slopes
 }
 
+double SyntheticCampus::BuildingGround(const BoxBuilding& b) const {
+  double highest = -std::numeric_limits<double>::infinity();
+  for (const BuildingPart& part : b.Parts()) {
+    highest = std::max(highest, TerrainHeight(part.center_m.x(), part.center_m.y()));
+    for (const auto& c : FootprintCorners(part)) highest = std::max(highest, TerrainHeight(c.x(), c.y()));
+  }
+  return highest;
+}
+
 double SyntheticCampus::BuildingTop(const BoxBuilding& b) const {
-  double highest = TerrainHeight(b.center_m.x(), b.center_m.y());
-  for (const auto& c : FootprintCorners(b)) highest = std::max(highest, TerrainHeight(c.x(), c.y()));
-  return highest + b.height_m;
+  double top = -std::numeric_limits<double>::infinity();
+  for (const BuildingPart& part : b.Parts()) top = std::max(top, part.height_m + part.roof_height_m);
+  return BuildingGround(b) + top;
+}
+
+std::optional<double> SyntheticCampus::RoofHeightAt(const BoxBuilding& b, double x, double y) const {
+  std::optional<double> best;
+  const double ground = BuildingGround(b);
+  for (const BuildingPart& part : b.Parts()) {
+    if (!PartCovers(part, x, y)) continue;
+    const Vector2d p = ToPartFrame(part, x, y);
+    const double hx = 0.5 * part.size_m.x(), hy = 0.5 * part.size_m.y(), rise = part.roof_height_m;
+    double z = ground + part.height_m;
+    switch (part.kind) {
+      case PrimitiveKind::kBox:
+      case PrimitiveKind::kCylinder: break;
+      case PrimitiveKind::kGable: z += rise * (1 - std::abs(p.y()) / hy); break;
+      case PrimitiveKind::kShed: z += rise * (p.y() + hy) / (2 * hy); break;
+      case PrimitiveKind::kHip: {
+        const double h_short = std::min(hx, hy);
+        z += rise * std::min((hx - std::abs(p.x())) / h_short, (hy - std::abs(p.y())) / h_short);
+        break;
+      }
+      case PrimitiveKind::kDome: {
+        const double rho2 = (p.x() / hx) * (p.x() / hx) + (p.y() / hy) * (p.y() / hy);
+        z += rise * std::sqrt(std::max(0.0, 1 - rho2));
+        break;
+      }
+    }
+    best = best ? std::max(*best, z) : z;
+  }
+  return best;
 }
 
 const CameraSpec* SyntheticCampus::FindCamera(const std::string& id) const {
@@ -82,75 +363,17 @@ const CameraSpec* SyntheticCampus::FindCamera(const std::string& id) const {
   return nullptr;
 }
 
-SyntheticCampus BuiltinCampus() {
-  SyntheticCampus campus;
-  campus.name = "campus";
-  campus.origin = Eigen::Vector3d(384500.0, 3768200.0, 85.0);  // UTM zone 11N-like magnitudes
-  campus.half_extent_m = 120;
-
-  // Twelve buildings in the four quadrants between the roads (id, centre, size, yaw, height).
-  campus.buildings = {
-      {"hall-a", {-30, -28}, {22, 14}, 0.0, 12},   {"hall-b", {-62, -30}, {16, 26}, 0.0, 18},
-      {"library", {28, -30}, {26, 18}, 0.15, 15},  {"lab", {62, -40}, {14, 14}, 0.0, 24},
-      {"gym", {30, 30}, {30, 20}, 0.0, 9},         {"tower", {70, 35}, {10, 10}, 0.3, 36},
-      {"dorm-1", {-28, 32}, {12, 30}, 0.0, 14},    {"dorm-2", {-55, 35}, {12, 30}, 0.0, 14},
-      {"cafe", {-28, 70}, {16, 10}, 0.0, 6},       {"annex", {30, 75}, {20, 12}, -0.2, 10},
-      {"depot", {-80, -75}, {24, 16}, 0.0, 8},     {"admin", {75, -80}, {18, 18}, 0.4, 20},
-  };
-
-  campus.cameras = {
-      MakeCamera(campus, "cam1", "Plaza south-west", {-12, -62}, 16, {4, -12}),
-      MakeCamera(campus, "cam2", "Gym east", {62, 8}, 18, {20, 4}),
-      MakeCamera(campus, "cam3", "Dorms north", {-10, 58}, 17, {-12, 12}),
-  };
-
-  // People walk along the roads' edges; cars drive on them. Loops are closed polylines.
-  auto person = [](uint32_t id, std::vector<Eigen::Vector2d> loop, double offset, Eigen::Vector3f color) {
-    Mover m;
-    m.id = id;
-    m.kind = MoverKind::kPerson;
-    m.loop_m = std::move(loop);
-    m.speed_mps = 1.4;
-    m.start_offset_m = offset;
-    m.size_m = {0.6, 0.4, 1.8};
-    m.color = color;
-    return m;
-  };
-  auto car = [](uint32_t id, std::vector<Eigen::Vector2d> loop, double offset, Eigen::Vector3f color) {
-    Mover m;
-    m.id = id;
-    m.kind = MoverKind::kCar;
-    m.loop_m = std::move(loop);
-    m.speed_mps = 6.0;
-    m.start_offset_m = offset;
-    m.size_m = {1.8, 4.5, 1.5};
-    m.color = color;
-    return m;
-  };
-  campus.movers = {
-      person(1, {{-6, -60}, {-6, 50}}, 10, {0.85f, 0.15f, 0.15f}),
-      person(2, {{6, -55}, {6, 40}}, 40, {0.15f, 0.25f, 0.85f}),
-      person(3, {{-50, -6}, {50, -6}}, 5, {0.95f, 0.75f, 0.10f}),
-      person(4, {{-45, 6}, {55, 6}}, 60, {0.60f, 0.15f, 0.70f}),
-      person(5, {{-20, -10}, {-8, -20}, {-20, -45}, {-40, -15}}, 0, {0.10f, 0.70f, 0.65f}),
-      car(101, {{-2, -100}, {-2, 100}}, 30, {0.90f, 0.90f, 0.95f}),
-      car(102, {{-100, 2}, {100, 2}}, 120, {0.20f, 0.20f, 0.22f}),
-  };
-  return campus;
-}
-
 void AppendBox(TriangleMesh& mesh, const Eigen::Vector3d& base, double yaw_rad, const Eigen::Vector3d& extent,
                const Eigen::Vector3f& wall_color, const Eigen::Vector3f& roof_color, int32_t object,
                SurfaceMaterial wall_material, SurfaceMaterial roof_material) {
   const double c = std::cos(yaw_rad), s = std::sin(yaw_rad);
-  const Eigen::Vector3d ax(c, s, 0), ay(-s, c, 0), az(0, 0, 1);
+  const Vector3d ax(c, s, 0), ay(-s, c, 0), az(0, 0, 1);
   const double hx = 0.5 * extent.x(), hy = 0.5 * extent.y(), h = extent.z();
-  auto corner = [&](double sx, double sy, double sz) -> Eigen::Vector3f {
+  auto corner = [&](double sx, double sy, double sz) -> Vector3f {
     return (base + sx * hx * ax + sy * hy * ay + sz * h * az).cast<float>();
   };
-  auto quad = [&](Eigen::Vector3f a, Eigen::Vector3f b, Eigen::Vector3f cc, Eigen::Vector3f d, const Eigen::Vector3f& color,
-                  SurfaceMaterial material) {
-    const Eigen::Vector3f n = (b - a).cross(cc - a).normalized();
+  auto quad = [&](Vector3f a, Vector3f b, Vector3f cc, Vector3f d, const Vector3f& color, SurfaceMaterial material) {
+    const Vector3f n = (b - a).cross(cc - a).normalized();
     const uint32_t first = static_cast<uint32_t>(mesh.positions.size());
     for (const auto& p : {a, b, cc, d}) {
       mesh.positions.push_back(p);
@@ -169,6 +392,47 @@ void AppendBox(TriangleMesh& mesh, const Eigen::Vector3d& base, double yaw_rad, 
   quad(corner(1, 1, 0), corner(-1, 1, 0), corner(-1, 1, 1), corner(1, 1, 1), wall_color, wall_material);
   quad(corner(-1, 1, 0), corner(-1, -1, 0), corner(-1, -1, 1), corner(-1, 1, 1), wall_color, wall_material);
   quad(corner(-1, -1, 1), corner(1, -1, 1), corner(1, 1, 1), corner(-1, 1, 1), roof_color, roof_material);
+}
+
+size_t AppendTree(TriangleMesh& mesh, const SyntheticCampus& campus, const Tree& tree) {
+  const double ground = campus.TerrainHeight(tree.position_m.x(), tree.position_m.y());
+  const double crown_z = ground + tree.trunk_height_m + tree.crown_radius_m;
+  // The trunk reaches into the crown so no gap shows when the crown sways.
+  AppendPrism(mesh, tree.position_m, tree.trunk_radius_m, tree.trunk_radius_m, ground - 0.3,
+              ground + tree.trunk_height_m + 0.5 * tree.crown_radius_m, 8, kTrunkColor, SurfaceMaterial::kVegetation, false);
+  const size_t crown_first = mesh.positions.size();
+  // Crown: a UV sphere, 12 segments by 8 rings, flat-shaded triangles.
+  constexpr int kSeg = 12, kRings = 8;
+  auto point = [&](int i, int k) {
+    const double theta = M_PI * k / kRings, a = 2 * M_PI * i / kSeg;
+    return Vector3d(tree.position_m.x() + tree.crown_radius_m * std::sin(theta) * std::cos(a),
+                    tree.position_m.y() + tree.crown_radius_m * std::sin(theta) * std::sin(a),
+                    crown_z + tree.crown_radius_m * std::cos(theta));
+  };
+  const Vector3d centre(tree.position_m.x(), tree.position_m.y(), crown_z);
+  auto add = [&](const Vector3d& a, const Vector3d& b, const Vector3d& c) {
+    Vector3d n = (b - a).cross(c - a);
+    if (!(n.norm() > 1e-12)) return;
+    if (n.dot((a + b + c) / 3 - centre) < 0) n = -n;
+    const uint32_t first = static_cast<uint32_t>(mesh.positions.size());
+    for (const Vector3d* p : {&a, &b, &c}) {
+      mesh.positions.push_back(p->cast<float>());
+      mesh.normals.push_back(n.normalized().cast<float>());
+      mesh.colors.push_back(kCrownColor);
+    }
+    mesh.indices.insert(mesh.indices.end(), {first, first + 1, first + 2});
+    mesh.triangle_material.push_back(SurfaceMaterial::kVegetation);
+    mesh.triangle_object.push_back(-1);
+  };
+  for (int k = 0; k < kRings; ++k) {
+    for (int i = 0; i < kSeg; ++i) {
+      const int j = (i + 1) % kSeg;
+      // Quads between rings; at the poles one of the two triangles is degenerate and skipped.
+      add(point(i, k), point(j, k), point(j, k + 1));
+      add(point(i, k), point(j, k + 1), point(i, k + 1));
+    }
+  }
+  return crown_first;
 }
 
 TriangleMesh BuildStaticMesh(const SyntheticCampus& campus, double grid_resolution_m) {
@@ -199,10 +463,25 @@ TriangleMesh BuildStaticMesh(const SyntheticCampus& campus, double grid_resoluti
   }
   for (size_t i = 0; i < campus.buildings.size(); ++i) {
     const BoxBuilding& b = campus.buildings[i];
-    const double base = campus.BuildingBase(b);
-    AppendBox(mesh, Eigen::Vector3d(b.center_m.x(), b.center_m.y(), base), b.yaw_rad,
-              Eigen::Vector3d(b.size_m.x(), b.size_m.y(), campus.BuildingTop(b) - base), kWallColor, kRoofColor,
-              static_cast<int32_t>(i), SurfaceMaterial::kWall, SurfaceMaterial::kRoof);
+    const double base = campus.BuildingBase(b), ground = campus.BuildingGround(b);
+    for (const BuildingPart& part : b.Parts()) {
+      PartMesher(mesh, part, base, ground + part.height_m, static_cast<int32_t>(i)).Mesh();
+    }
+  }
+  for (const Tree& tree : campus.trees) AppendTree(mesh, campus, tree);
+  for (const StaticObject& o : campus.objects) {
+    const double ground = campus.TerrainHeight(o.position_m.x(), o.position_m.y());
+    double lowest = ground;
+    for (const auto& c : FootprintCorners(BuildingPart{PrimitiveKind::kBox, o.position_m, o.size_m.head<2>(), o.yaw_rad}))
+      lowest = std::min(lowest, campus.TerrainHeight(c.x(), c.y()));
+    if (o.shape == StaticObject::Shape::kBox) {
+      AppendBox(mesh, Vector3d(o.position_m.x(), o.position_m.y(), lowest - 0.2), o.yaw_rad,
+                Vector3d(o.size_m.x(), o.size_m.y(), ground + o.size_m.z() - (lowest - 0.2)), o.color, o.color, -1,
+                SurfaceMaterial::kObject, SurfaceMaterial::kObject);
+    } else {
+      AppendPrism(mesh, o.position_m, 0.5 * o.size_m.x(), 0.5 * o.size_m.y(), lowest - 0.2, ground + o.size_m.z(), 16, o.color,
+                  SurfaceMaterial::kObject, true);
+    }
   }
   return mesh;
 }
@@ -221,11 +500,11 @@ MoverState MoverAt(const SyntheticCampus& campus, const Mover& mover, double t_s
   double s = std::fmod(mover.start_offset_m + mover.speed_mps * t_s, perimeter);
   if (s < 0) s += perimeter;
   for (size_t i = 0; i < n; ++i) {
-    const Eigen::Vector2d a = mover.loop_m[i], b = mover.loop_m[(i + 1) % n];
+    const Vector2d a = mover.loop_m[i], b = mover.loop_m[(i + 1) % n];
     const double len = (b - a).norm();
     if (s <= len || i + 1 == n) {
-      const Eigen::Vector2d dir = len > 0 ? Eigen::Vector2d((b - a) / len) : Eigen::Vector2d::UnitX();
-      const Eigen::Vector2d p = a + std::min(s, len) * dir;
+      const Vector2d dir = len > 0 ? Vector2d((b - a) / len) : Vector2d::UnitX();
+      const Vector2d p = a + std::min(s, len) * dir;
       state.position_m = {p.x(), p.y(), campus.TerrainHeight(p.x(), p.y())};
       state.heading_rad = std::atan2(dir.y(), dir.x());
       return state;
@@ -243,24 +522,25 @@ Rigid3d CameraPoseAt(const SyntheticCampus& campus, const CameraSpec& camera, do
   if (!(length > 0)) return camera.world_from_camera;
   // Ping-pong along the polyline: s in [0, 2 length) folds back onto [0, length].
   double s = std::fmod(path.speed_mps * t_s, 2 * length);
+  if (!std::isfinite(s)) s = 0;
   if (s < 0) s += 2 * length;
   const bool returning = s > length;
   if (returning) s = 2 * length - s;
-  Eigen::Vector2d p = path.waypoints_m.back(), dir = Eigen::Vector2d::UnitX();
+  Vector2d p = path.waypoints_m.back(), dir = Vector2d::UnitX();
   for (size_t i = 0; i + 1 < path.waypoints_m.size(); ++i) {
-    const Eigen::Vector2d a = path.waypoints_m[i], b = path.waypoints_m[i + 1];
+    const Vector2d a = path.waypoints_m[i], b = path.waypoints_m[i + 1];
     const double len = (b - a).norm();
     if (s <= len || i + 2 == path.waypoints_m.size()) {
-      dir = len > 0 ? Eigen::Vector2d((b - a) / len) : Eigen::Vector2d::UnitX();
+      dir = len > 0 ? Vector2d((b - a) / len) : Vector2d::UnitX();
       p = a + std::min(s, len) * dir;
       break;
     }
     s -= len;
   }
   if (returning) dir = -dir;
-  const Eigen::Vector3d eye(p.x(), p.y(), campus.TerrainHeight(p.x(), p.y()) + path.height_m);
+  const Vector3d eye(p.x(), p.y(), campus.TerrainHeight(p.x(), p.y()) + path.height_m);
   const double pitch = path.pitch_deg * M_PI / 180;
-  const Eigen::Vector3d forward(std::cos(pitch) * dir.x(), std::cos(pitch) * dir.y(), -std::sin(pitch));
+  const Vector3d forward(std::cos(pitch) * dir.x(), std::cos(pitch) * dir.y(), -std::sin(pitch));
   return LookAt(eye, eye + forward);
 }
 

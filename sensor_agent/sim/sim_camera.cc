@@ -2,9 +2,12 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
+
+#include "sensor_agent/sim/camera_effects.h"
 
 namespace ave::sim {
 namespace {
@@ -18,20 +21,54 @@ constexpr uint32_t kNoTriangle = std::numeric_limits<uint32_t>::max();
 // What the shading pass needs of a triangle; the position comes from the depth buffer.
 struct Surface {
   SurfaceMaterial material = SurfaceMaterial::kTerrain;
+  PixelClass cls = PixelClass::kTerrain;
   uint32_t object_id = kGroundId;
   int32_t building = -1;                  // index into the campus's buildings, or -1
   Vector3f normal = Vector3f::UnitZ();    // unit, local frame, outward
-  Vector3f color = Vector3f::Zero();      // movers only: rgb in [0, 1]
+  Vector3f color = Vector3f::Zero();      // movers, trees, static objects: rgb in [0, 1]
 };
 
-// A building's own frame and palette, for window grids and roof edges.
-struct BuildingLook {
+// One building part's own frame, for window grids and roof edges.
+struct PartLook {
+  scene::PrimitiveKind kind = scene::PrimitiveKind::kBox;
   Vector2d center = Vector2d::Zero();
   double cos_yaw = 1, sin_yaw = 0;
   Vector2d half_size = Vector2d::Ones();
-  double ground_z = 0;  // the box base is sunk 0.5 m below the lowest ground (campus.cc)
-  double top_z = 0;
+  double eave_z = 0;  // walls end here (flat roofs carry a 0.9 m parapet below it)
+
+  Vector2d ToPart(const Vector3d& p) const {
+    const double dx = p.x() - center.x(), dy = p.y() - center.y();
+    return {cos_yaw * dx + sin_yaw * dy, -sin_yaw * dx + cos_yaw * dy};
+  }
+  // Distance outside the footprint (<= 0 inside), metres.
+  double Outside(const Vector3d& p) const {
+    const Vector2d q = ToPart(p);
+    if (kind == scene::PrimitiveKind::kCylinder || kind == scene::PrimitiveKind::kDome) {
+      return (q.cwiseQuotient(half_size).norm() - 1.0) * half_size.minCoeff();
+    }
+    return std::max(std::abs(q.x()) - half_size.x(), std::abs(q.y()) - half_size.y());
+  }
+};
+
+// A building's parts and palette.
+struct BuildingLook {
+  std::vector<PartLook> parts;
+  double ground_z = 0;  // the base is sunk 0.5 m below the lowest ground (campus.cc)
   Vector3f wall_color, roof_color;
+
+  // The part a surface point belongs to (the one it lies closest inside or on).
+  const PartLook& PartAt(const Vector3d& p) const {
+    size_t best = 0;
+    double best_outside = std::numeric_limits<double>::infinity();
+    for (size_t i = 0; i < parts.size(); ++i) {
+      const double o = parts[i].Outside(p);
+      if (std::abs(o) < best_outside) {
+        best_outside = std::abs(o);
+        best = i;
+      }
+    }
+    return parts[best];
+  }
 };
 
 // ---- Deterministic procedural noise ---------------------------------------------------------
@@ -92,14 +129,12 @@ Vector3f Grass(const Vector2d& p, double footprint_m) {
 }
 
 Vector3f Ground(const scene::SyntheticCampus& campus, const Vector2d& p, double footprint_m) {
-  const double hw = campus.road_half_width_m;
-  const bool north_south = std::abs(p.x()) <= hw, east_west = std::abs(p.y()) <= hw;
-  if (!north_south && !east_west) return Grass(p, footprint_m);
+  const std::optional<scene::RoadPoint> road = campus.RoadAt(p.x(), p.y());
+  if (!road) return Grass(p, footprint_m);
   const float g = 0.30f + 0.08f * (Octave(p, 0.6, 21, footprint_m) - 0.5f) + 0.08f * (Octave(p, 5.0, 22, footprint_m) - 0.5f);
   const Vector3f asphalt(g, g, 1.03f * g);
-  if (north_south && east_west) return asphalt;  // the crossing carries no markings
-  const double across = north_south ? std::abs(p.x()) : std::abs(p.y());
-  const double along = north_south ? p.y() : p.x();
+  if (road->crossing) return asphalt;  // the crossing carries no markings
+  const double hw = road->half_width_m, across = road->across_m, along = road->along_m;
   if (across > hw - 0.25) return Vector3f(0.64f, 0.63f, 0.60f);  // concrete kerb
   // Lines 0.15 m wide: a solid edge line inside each kerb, 3 m dashes every 6 m on the centre.
   // Where a pixel is wider than the line, paint only its covered share (keeps distant lines calm).
@@ -109,25 +144,34 @@ Vector3f Ground(const scene::SyntheticCampus& campus, const Vector2d& p, double 
   return edge_line || centre_dash ? Mix(asphalt, Vector3f(0.92f, 0.92f, 0.88f), coverage) : asphalt;
 }
 
-Vector3f Wall(const BuildingLook& b, int32_t building, const Vector3d& p, const Vector3f& n, double footprint_m) {
-  const double dx = p.x() - b.center.x(), dy = p.y() - b.center.y();
-  const double bx = b.cos_yaw * dx + b.sin_yaw * dy, by = -b.sin_yaw * dx + b.cos_yaw * dy;
+Vector3f Wall(const BuildingLook& look, int32_t building, const Vector3d& p, const Vector3f& n, double footprint_m) {
+  const PartLook& b = look.PartAt(p);
+  const Vector2d q = b.ToPart(p);
+  const double bx = q.x(), by = q.y();
   const double n_along_x = b.cos_yaw * n.x() + b.sin_yaw * n.y();
-  const bool x_face = std::abs(n_along_x) > 0.7;  // the face's normal is the building's +-x axis
-  const double along = x_face ? by + b.half_size.y() : bx + b.half_size.x();
-  const double length = 2 * (x_face ? b.half_size.y() : b.half_size.x());
-  const double h = p.z() - b.ground_z;
-  const uint32_t face = (x_face ? 0u : 2u) + ((x_face ? n_along_x : -b.sin_yaw * n.x() + b.cos_yaw * n.y()) > 0 ? 1u : 0u);
+  const bool round = b.kind == scene::PrimitiveKind::kCylinder || b.kind == scene::PrimitiveKind::kDome;
+  const bool x_face = std::abs(n_along_x) > 0.7;  // the face's normal is the part's +-x axis
+  double along = x_face ? by + b.half_size.y() : bx + b.half_size.x();
+  double length = 2 * (x_face ? b.half_size.y() : b.half_size.x());
+  if (round) {  // unrolled around the circumference
+    const double r = 0.5 * (b.half_size.x() + b.half_size.y());
+    along = (std::atan2(by / b.half_size.y(), bx / b.half_size.x()) + M_PI) * r;
+    length = 2 * M_PI * r;
+  }
+  const double h = p.z() - look.ground_z;
+  const uint32_t face = round ? 0u : (x_face ? 0u : 2u) + ((x_face ? n_along_x : -b.sin_yaw * n.x() + b.cos_yaw * n.y()) > 0 ? 1u : 0u);
+  const bool flat = b.kind == scene::PrimitiveKind::kBox || b.kind == scene::PrimitiveKind::kCylinder;
+  const double window_top = flat ? b.eave_z - 0.9 : b.eave_z - 0.3;  // parapet, or the eaves
 
   const Vector2d uv(along, h);
-  Vector3f c = b.wall_color * (0.92f + 0.16f * Octave(uv, 1.2, 31 + building, footprint_m));
+  Vector3f c = look.wall_color * (0.92f + 0.16f * Octave(uv, 1.2, 31 + building, footprint_m));
   // Storeys of 3.5 m, bays of ~3 m fitted to the wall; no windows in the 0.9 m parapet.
   constexpr double kStorey = 3.5;
   const double bay = length / std::max(1.0, std::round(length / 3.0));
   const double row = std::floor(h / kStorey), col = std::floor(along / bay);
   const double fv = h / kStorey - row, fu = along / bay - col;
   if (fv < 0.04 && h > 1.0) return 0.82f * c;  // slab line at each floor
-  if (h > 0.3 && p.z() < b.top_z - 0.9 && fv > 0.28 && fv < 0.78 && fu > 0.18 && fu < 0.82) {
+  if (h > 0.3 && p.z() < window_top && fv > 0.28 && fv < 0.78 && fu > 0.18 && fu < 0.82) {
     const uint32_t seed = 1000u + 4u * static_cast<uint32_t>(building) + face;
     const float r = Hash01(static_cast<int64_t>(col), static_cast<int64_t>(row), seed);
     Vector3f glass = Mix(Vector3f(0.10f, 0.14f, 0.22f), Vector3f(0.36f, 0.46f, 0.60f), r);
@@ -138,13 +182,27 @@ Vector3f Wall(const BuildingLook& b, int32_t building, const Vector3d& p, const 
   return c;
 }
 
-Vector3f Roof(const BuildingLook& b, int32_t building, const Vector3d& p, double footprint_m) {
-  const double dx = p.x() - b.center.x(), dy = p.y() - b.center.y();
-  const double bx = b.cos_yaw * dx + b.sin_yaw * dy, by = -b.sin_yaw * dx + b.cos_yaw * dy;
-  const double to_edge = std::min(b.half_size.x() - std::abs(bx), b.half_size.y() - std::abs(by));
-  if (to_edge < 0.4) return Vector3f(0.66f, 0.64f, 0.60f);  // parapet
-  const Vector2d q(bx, by);
-  return b.roof_color * (0.85f + 0.3f * Octave(q, 1.5, 51 + building, footprint_m));
+Vector3f Roof(const BuildingLook& look, int32_t building, const Vector3d& p, double footprint_m) {
+  const PartLook& b = look.PartAt(p);
+  const Vector2d q = b.ToPart(p);
+  if (b.kind == scene::PrimitiveKind::kBox) {
+    const double to_edge = std::min(b.half_size.x() - std::abs(q.x()), b.half_size.y() - std::abs(q.y()));
+    if (to_edge < 0.4) return Vector3f(0.66f, 0.64f, 0.60f);  // parapet
+  } else if (b.kind == scene::PrimitiveKind::kCylinder) {
+    if (-b.Outside(p) < 0.4) return Vector3f(0.66f, 0.64f, 0.60f);
+  } else if (b.kind != scene::PrimitiveKind::kDome) {
+    // Pitched roofs: rows of tiles every 0.35 m up the slope (faded out where they would alias).
+    const float rows = 0.5f + 0.5f * static_cast<float>(std::sin(2 * M_PI * p.z() / 0.35 * 2.5));
+    const float r = Resolved(footprint_m, 0.35);
+    return look.roof_color * (0.85f + 0.1f * Octave(q, 1.5, 51 + building, footprint_m) + 0.12f * r * (rows - 0.5f));
+  }
+  return look.roof_color * (0.85f + 0.3f * Octave(q, 1.5, 51 + building, footprint_m));
+}
+
+Vector3f Vegetation(const Vector3f& base, const Vector3d& p, double footprint_m) {
+  const Vector2d q(p.x() + 0.7 * p.z(), p.y() - 0.5 * p.z());
+  const float leaves = 0.6f * Octave(q, 0.6, 61, footprint_m) + 0.4f * Octave(q, 0.25, 62, footprint_m);
+  return base * (0.7f + 0.6f * leaves);
 }
 
 Vector3f Sky(const Vector3d& direction_in_world) {
@@ -292,6 +350,7 @@ void AppendMover(const scene::SyntheticCampus& campus, const scene::Mover& mover
     const Eigen::Vector3f p0 = mesh.positions[mesh.indices[3 * t]], p1 = mesh.positions[mesh.indices[3 * t + 1]],
                           p2 = mesh.positions[mesh.indices[3 * t + 2]];
     surfaces[t].object_id = id;
+    surfaces[t].cls = mover.kind == scene::MoverKind::kPerson ? PixelClass::kPerson : PixelClass::kVehicle;
     surfaces[t].normal = (p1 - p0).cross(p2 - p0).normalized();
   }
 }
@@ -315,6 +374,7 @@ struct CampusRenderer::Impl {
   std::vector<uint32_t> indices;             // three per static triangle
   std::vector<Surface> surfaces;             // one per static triangle
   std::vector<BuildingLook> buildings;       // one per campus building
+  std::vector<SwayingCrown> crowns;          // one per tree, into positions
 };
 
 CampusRenderer::CampusRenderer(const scene::SyntheticCampus& campus, Options options) {
@@ -324,7 +384,21 @@ CampusRenderer::CampusRenderer(const scene::SyntheticCampus& campus, Options opt
   impl->options = options;
   impl->sun = options.sun_direction.normalized().cast<float>();
 
-  TriangleMesh mesh = scene::BuildStaticMesh(campus, options.terrain_resolution_m);
+  // The static mesh without trees, then the trees one by one so each crown's vertex range is
+  // known (waving vegetation moves them).
+  scene::SyntheticCampus bare = campus;
+  bare.trees.clear();
+  TriangleMesh mesh = scene::BuildStaticMesh(bare, options.terrain_resolution_m);
+  for (size_t i = 0; i < campus.trees.size(); ++i) {
+    const scene::Tree& tree = campus.trees[i];
+    SwayingCrown crown;
+    crown.first_vertex = scene::AppendTree(mesh, campus, tree);
+    crown.end_vertex = mesh.positions.size();
+    crown.bottom_z = static_cast<float>(campus.TerrainHeight(tree.position_m.x(), tree.position_m.y()) + tree.trunk_height_m);
+    crown.height_m = static_cast<float>(2 * tree.crown_radius_m);
+    crown.phase_rad = static_cast<float>(2 * M_PI * Hash01(static_cast<int64_t>(i), 0, 77));
+    impl->crowns.push_back(crown);
+  }
   impl->positions = std::move(mesh.positions);
   impl->indices = std::move(mesh.indices);
   impl->surfaces.resize(impl->indices.size() / 3);
@@ -335,8 +409,17 @@ CampusRenderer::CampusRenderer(const scene::SyntheticCampus& campus, Options opt
     const Eigen::Vector3f& p2 = impl->positions[impl->indices[3 * t + 2]];
     s.material = mesh.triangle_material[t];
     s.building = mesh.triangle_object[t];
-    s.object_id = s.building >= 0 ? kBuildingIdBase + static_cast<uint32_t>(s.building) : kGroundId;
     s.normal = (p1 - p0).cross(p2 - p0).normalized();
+    s.color = mesh.colors[impl->indices[3 * t]];
+    switch (s.material) {
+      case SurfaceMaterial::kTerrain: s.cls = PixelClass::kTerrain; s.object_id = kGroundId; break;
+      case SurfaceMaterial::kRoad: s.cls = PixelClass::kRoad; s.object_id = kGroundId; break;
+      case SurfaceMaterial::kWall: s.cls = PixelClass::kWall; break;
+      case SurfaceMaterial::kRoof: s.cls = PixelClass::kRoof; break;
+      case SurfaceMaterial::kVegetation: s.cls = PixelClass::kVegetation; s.object_id = kVegetationId; break;
+      case SurfaceMaterial::kObject: s.cls = PixelClass::kStaticObject; s.object_id = kStaticObjectId; break;
+    }
+    if (s.building >= 0) s.object_id = kBuildingIdBase + static_cast<uint32_t>(s.building);
   }
 
   const std::array<Vector3f, 5> wall_palette = {Vector3f(0.80f, 0.74f, 0.62f), Vector3f(0.74f, 0.74f, 0.72f),
@@ -347,12 +430,17 @@ CampusRenderer::CampusRenderer(const scene::SyntheticCampus& campus, Options opt
   for (size_t i = 0; i < campus.buildings.size(); ++i) {
     const scene::BoxBuilding& b = campus.buildings[i];
     BuildingLook look;
-    look.center = b.center_m;
-    look.cos_yaw = std::cos(b.yaw_rad);
-    look.sin_yaw = std::sin(b.yaw_rad);
-    look.half_size = 0.5 * b.size_m;
     look.ground_z = campus.BuildingBase(b) + 0.5;
-    look.top_z = campus.BuildingTop(b);
+    for (const scene::BuildingPart& part : b.Parts()) {
+      PartLook pl;
+      pl.kind = part.kind;
+      pl.center = part.center_m;
+      pl.cos_yaw = std::cos(part.yaw_rad);
+      pl.sin_yaw = std::sin(part.yaw_rad);
+      pl.half_size = 0.5 * part.size_m;
+      pl.eave_z = campus.BuildingGround(b) + part.height_m;
+      look.parts.push_back(pl);
+    }
     look.wall_color = wall_palette[Hash(static_cast<int64_t>(i), 0, 7) % wall_palette.size()];
     look.roof_color = roof_palette[Hash(static_cast<int64_t>(i), 1, 7) % roof_palette.size()];
     impl->buildings.push_back(look);
@@ -366,7 +454,7 @@ CampusRenderer::~CampusRenderer() = default;
 
 const CampusRenderer::Options& CampusRenderer::options() const { return impl_->options; }
 
-SimImage CampusRenderer::Render(const PinholeIntrinsics& k, const Rigid3d& world_from_camera, double t_s) const {
+SimImage CampusRenderer::Render(const PinholeIntrinsics& k, const Rigid3d& world_from_camera, double t_s, Stats* stats) const {
   SimImage image;
   if (!k.Check().empty() || !world_from_camera.translation.allFinite() || !world_from_camera.rotation.coeffs().allFinite()) {
     return image;
@@ -378,6 +466,7 @@ SimImage CampusRenderer::Render(const PinholeIntrinsics& k, const Rigid3d& world
   image.height = h;
   image.bgr.resize(3 * pixels);
   image.object_id.assign(pixels, kSkyId);
+  image.class_id.assign(pixels, static_cast<uint8_t>(PixelClass::kSky));
   image.depth_m.assign(pixels, std::numeric_limits<float>::infinity());
   std::vector<uint32_t> triangle(pixels, kNoTriangle);
 
@@ -390,6 +479,17 @@ SimImage CampusRenderer::Render(const PinholeIntrinsics& k, const Rigid3d& world
   Rasterizer raster(k, m.options.near_m, image.depth_m.data(), triangle.data());
   std::vector<Vector3d> v_cam(m.positions.size());
   for (size_t i = 0; i < m.positions.size(); ++i) v_cam[i] = camera_from_world_rot * m.positions[i].cast<double>() + camera_from_world_t;
+  if (m.options.waving_vegetation && !m.crowns.empty()) {
+    const auto sway_start = std::chrono::steady_clock::now();
+    std::vector<Eigen::Vector3f> swayed = m.positions;
+    SwayVegetation(*m.options.waving_vegetation, t_s, m.positions, m.crowns, swayed);
+    for (const SwayingCrown& crown : m.crowns) {
+      for (size_t i = crown.first_vertex; i < crown.end_vertex; ++i) {
+        v_cam[i] = camera_from_world_rot * swayed[i].cast<double>() + camera_from_world_t;
+      }
+    }
+    if (stats) stats->waving_vegetation_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - sway_start).count();
+  }
   const size_t n_static = m.surfaces.size();
   for (size_t t = 0; t < n_static; ++t) {
     raster.Draw(v_cam[m.indices[3 * t]], v_cam[m.indices[3 * t + 1]], v_cam[m.indices[3 * t + 2]], static_cast<uint32_t>(t));
@@ -432,11 +532,13 @@ SimImage CampusRenderer::Render(const PinholeIntrinsics& k, const Rigid3d& world
           case SurfaceMaterial::kWall: rgb = Wall(m.buildings[s.building], s.building, p, s.normal, footprint_m); break;
           case SurfaceMaterial::kRoof: rgb = Roof(m.buildings[s.building], s.building, p, footprint_m); break;
           case SurfaceMaterial::kObject: rgb = s.color; break;
+          case SurfaceMaterial::kVegetation: rgb = Vegetation(s.color, p, footprint_m); break;
         }
         rgb *= 0.45f + 0.55f * std::max(0.0f, s.normal.dot(sun));
         const float haze = 1.0f - std::exp(static_cast<float>(-distance / 900.0));
         rgb = Mix(rgb, Vector3f(0.74f, 0.77f, 0.78f), haze);
         image.object_id[i] = s.object_id;
+        image.class_id[i] = static_cast<uint8_t>(s.cls);
       }
       for (int c = 0; c < 3; ++c) {
         image.bgr[3 * i + c] = static_cast<uint8_t>(255.0f * std::clamp(rgb[2 - c], 0.0f, 1.0f) + 0.5f);

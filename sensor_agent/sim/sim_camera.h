@@ -1,6 +1,8 @@
 #pragma once
 // The simulated camera of the sensor agent: a deterministic single-threaded CPU rasteriser of the
-// synthetic campus (terrain, buildings, movers at time t) with per-pixel ground truth.
+// synthetic campus (terrain, roads, buildings of every primitive, trees, static objects, movers at
+// time t) with per-pixel ground truth. Camera effects (noise, illumination, JPEG, occlusion, lens
+// distortion) are applied after rendering by camera_effects.h; waving vegetation is renderer side.
 //
 // Appearance is the "real world", deliberately unlike the viewer model's flat neutral colours:
 // procedural grass, asphalt with lane markings, walls with window grids, coloured roofs and
@@ -13,6 +15,7 @@
 // the intrinsics is ignored (ideal pinhole render).
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -21,26 +24,49 @@
 #include "model_store/geometry/camera.h"
 #include "model_store/geometry/rigid3.h"
 #include "model_store/scene/campus.h"
+#include "sensor_agent/sim/effects.h"
 
 namespace ave::sim {
 
 // Per-pixel object ids (SimImage::object_id):
 //   kSkyId                      the pixel's ray hits nothing;
 //   kGroundId                   terrain, roads included;
+//   kVegetationId               any tree (trunk or crown);
+//   kStaticObjectId             any static object (bench, kiosk, low wall);
+//   kOccluderId                 the rolling_occlusion effect's occluder in front of the lens;
 //   kBuildingIdBase + i         SyntheticCampus::buildings[i] (walls and roof), i < 999'000;
 //   kMoverIdBase + Mover::id    any part of that mover (ids below 2^32 - kMoverIdBase).
+// The LiDAR simulators label points with the same scheme (rotating_lidar.h).
 inline constexpr uint32_t kSkyId = 0;
 inline constexpr uint32_t kGroundId = 1;
+inline constexpr uint32_t kVegetationId = 2;
+inline constexpr uint32_t kStaticObjectId = 3;
+inline constexpr uint32_t kOccluderId = 4;
 inline constexpr uint32_t kBuildingIdBase = 1'000;
 inline constexpr uint32_t kMoverIdBase = 1'000'000;
 
 inline bool IsBuildingId(uint32_t id) { return id >= kBuildingIdBase && id < kMoverIdBase; }
 inline bool IsMoverId(uint32_t id) { return id >= kMoverIdBase; }
 
+// Per-pixel semantic classes (SimImage::class_id), what the class mask PNG stores.
+enum class PixelClass : uint8_t {
+  kSky = 0,
+  kTerrain = 1,
+  kRoad = 2,
+  kWall = 3,
+  kRoof = 4,
+  kVegetation = 5,
+  kStaticObject = 6,
+  kPerson = 7,
+  kVehicle = 8,
+  kOccluder = 9,
+};
+
 struct SimImage {
   int width = 0, height = 0;
   std::vector<uint8_t> bgr;          // 3 bytes per pixel, top row first: cv::Mat(h, w, CV_8UC3, bgr.data())
   std::vector<uint32_t> object_id;   // one per pixel, see the id scheme above
+  std::vector<uint8_t> class_id;     // one per pixel, a PixelClass
   std::vector<float> depth_m;        // one per pixel: z in the camera frame; +inf where the sky shows
 
   size_t Index(int u, int v) const { return static_cast<size_t>(v) * width + u; }
@@ -55,6 +81,9 @@ struct RendererOptions {
   Eigen::Vector3d sun_direction = Eigen::Vector3d(0.45, -0.35, 0.82);
   // Near clipping plane in the camera frame; triangles crossing it are clipped, not dropped.
   double near_m = 0.05;
+  // Set: tree crowns sway with time (the waving_vegetation effect, camera_effects.h). Unset, the
+  // effect's code never runs.
+  std::optional<EffectParams> waving_vegetation;
 
   // Empty when usable; otherwise names the first bad field.
   std::string Check() const;
@@ -77,7 +106,12 @@ class CampusRenderer {
   // `world_from_camera` (local frame). Invalid intrinsics (PinholeIntrinsics::Check) or a
   // non-finite pose give an empty image (width = height = 0). Pure: the same inputs give
   // bit-identical output.
-  SimImage Render(const PinholeIntrinsics& intrinsics, const Rigid3d& world_from_camera, double t_s) const;
+  // `stats`, when given, receives the time spent in renderer-side effects.
+  struct Stats {
+    double waving_vegetation_s = 0;  // swaying the crowns (0 when the effect is off)
+  };
+  SimImage Render(const PinholeIntrinsics& intrinsics, const Rigid3d& world_from_camera, double t_s,
+                  Stats* stats = nullptr) const;
 
   const Options& options() const;
 

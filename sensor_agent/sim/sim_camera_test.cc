@@ -30,7 +30,12 @@ CampusRenderer::Options StaticOnly() {
 uint32_t IdFromHit(const TriangleMesh& mesh, const std::optional<RayHit>& hit) {
   if (!hit) return kSkyId;
   const int32_t object = mesh.triangle_object[hit->triangle];
-  return object >= 0 ? kBuildingIdBase + static_cast<uint32_t>(object) : kGroundId;
+  if (object >= 0) return kBuildingIdBase + static_cast<uint32_t>(object);
+  switch (mesh.triangle_material[hit->triangle]) {
+    case SurfaceMaterial::kVegetation: return kVegetationId;
+    case SurfaceMaterial::kObject: return kStaticObjectId;
+    default: return kGroundId;
+  }
 }
 
 // True when the 3x3 neighbourhood of (u, v) carries one id: away from silhouettes and seams.

@@ -8,7 +8,8 @@
 
 #include "absl/strings/str_cat.h"
 #include "model_store/scene/campus.h"
-#include "sensor_agent/sim/sim_camera.h"
+#include "sensor_agent/sim/camera_effects.h"
+#include "sensor_agent/sim/scenario.h"
 
 namespace ave {
 namespace {
@@ -18,30 +19,35 @@ int64_t WallNs() {
       .count();
 }
 
-class SimCampusSource final : public FrameSource {
+// A scenario's camera through the simulator's camera pipeline: the scenario's effects for this
+// camera, its true pose per frame (moving cameras walk their path).
+class SimScenarioSource final : public FrameSource {
  public:
-  SimCampusSource(scene::SyntheticCampus campus, scene::CameraSpec camera, const SourceOptions& options)
-      : campus_(std::move(campus)), camera_(std::move(camera)), renderer_(campus_), options_(options) {}
+  SimScenarioSource(const sim::Scenario& scenario, const scene::CameraSpec& camera, const SourceOptions& options)
+      : scenario_name_(scenario.name),
+        camera_(scenario.world, camera, scenario.EffectsForCamera(camera.id), scenario.seed),
+        options_(options) {}
 
   absl::StatusOr<CapturedFrame> Next() override {
     CapturedFrame frame;
-    frame.scene_time_s = options_.sim_start_s + static_cast<double>(index_++) / options_.fps;
+    const int64_t index = index_++;
+    frame.scene_time_s = options_.sim_start_s + static_cast<double>(index) / options_.fps;
     frame.capture_time_ns = WallNs();
-    sim::SimImage image = renderer_.Render(camera_.intrinsics, camera_.world_from_camera, frame.scene_time_s);
+    sim::SimImage image = camera_.Frame(index, frame.scene_time_s);
+    if (image.width == 0) return absl::InternalError(absl::StrCat(description(), ": renders nothing"));
     frame.width = image.width;
     frame.height = image.height;
     frame.bgr = std::move(image.bgr);
-    frame.world_from_camera = camera_.world_from_camera;
+    frame.world_from_camera = camera_.PoseAt(frame.scene_time_s);
     return frame;
   }
-  PinholeIntrinsics intrinsics() const override { return camera_.intrinsics; }
-  std::string description() const override { return "simulated " + campus_.name + " camera " + camera_.id; }
+  PinholeIntrinsics intrinsics() const override { return camera_.camera().intrinsics; }
+  std::string description() const override { return "simulated " + scenario_name_ + " camera " + camera_.camera().id; }
   bool live() const override { return false; }
 
  private:
-  scene::SyntheticCampus campus_;
-  scene::CameraSpec camera_;
-  sim::CampusRenderer renderer_;
+  std::string scenario_name_;
+  sim::SimulatedCamera camera_;
   SourceOptions options_;
   int64_t index_ = 0;
 };
@@ -122,16 +128,18 @@ absl::StatusOr<std::unique_ptr<FrameSource>> OpenSource(const std::string& spec,
       return absl::InvalidArgumentError(absl::StrCat("source '", spec, "': expected sim:SCENE#CAMERA"));
     }
     const std::string scene_name = rest.substr(0, hash), camera_id = rest.substr(hash + 1);
-    if (scene_name != "campus") {
-      return absl::NotFoundError(absl::StrCat("source '", spec, "': unknown scene '", scene_name, "' (known: campus)"));
+    absl::StatusOr<sim::Scenario> scenario = sim::LoadScenario(scene_name);
+    if (!scenario.ok()) {
+      return absl::Status(scenario.status().code(), absl::StrCat("source '", spec, "': unknown scenario: ", scenario.status().message()));
     }
-    scene::SyntheticCampus campus = scene::BuiltinCampus();
-    const scene::CameraSpec* camera = campus.FindCamera(camera_id);
+    const scene::CameraSpec* camera = scenario->world.FindCamera(camera_id);
     if (!camera) {
-      return absl::NotFoundError(absl::StrCat("source '", spec, "': the campus has no camera '", camera_id, "'"));
+      std::string known;
+      for (const auto& c : scenario->world.cameras) known += (known.empty() ? "" : ", ") + c.id;
+      return absl::NotFoundError(
+          absl::StrCat("source '", spec, "': the ", scenario->name, " scenario has no camera '", camera_id, "' (cameras: ", known, ")"));
     }
-    scene::CameraSpec copy = *camera;
-    return std::unique_ptr<FrameSource>(new SimCampusSource(std::move(campus), std::move(copy), options));
+    return std::unique_ptr<FrameSource>(new SimScenarioSource(*scenario, *camera, options));
   }
   auto capture = std::make_unique<cv::VideoCapture>();
   bool live = true;

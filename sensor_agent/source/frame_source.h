@@ -3,7 +3,8 @@
 // V4L2 device (all through OpenCV VideoCapture), or the simulated campus camera.
 //
 // Source specs:
-//   sim:campus#cam1      the built-in campus seen by its camera cam1 (ground-truth pose attached)
+//   sim:SCENARIO#CAMERA  a scenario camera through the simulator (bundled name or .yaml path;
+//                        its effects apply, moving cameras walk their path; true pose attached)
 //   file:/path/video.mp4 a video file (ends at its last frame)
 //   rtsp://host/stream   a network stream (also http://, https://)
 //   v4l2:/dev/video0     a local capture device (or v4l2:0)

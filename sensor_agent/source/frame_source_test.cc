@@ -1,6 +1,7 @@
 #include "sensor_agent/source/frame_source.h"
 
 #include <filesystem>
+#include <fstream>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -28,9 +29,44 @@ TEST(OpenSource, SimulatedCampusCameraGivesFramesWithItsPose) {
   EXPECT_FALSE((*source)->live());
 }
 
+TEST(OpenSource, MovingScenarioCameraCarriesItsPathPose) {
+  auto source = OpenSource("sim:campus#backpack", {.fps = 2});
+  ASSERT_TRUE(source.ok()) << source.status();
+  auto a = (*source)->Next();
+  auto b = (*source)->Next();
+  ASSERT_TRUE(a.ok() && b.ok());
+  ASSERT_TRUE(a->world_from_camera && b->world_from_camera);
+  // The backpack walks at 1.4 m/s: half a second apart, 0.7 m further along.
+  EXPECT_NEAR((b->world_from_camera->translation - a->world_from_camera->translation).head<2>().norm(), 0.7, 1e-6);
+  EXPECT_NE(a->bgr, b->bgr);
+}
+
+TEST(OpenSource, ScenarioFilesAndOtherBundledScenarios) {
+  auto courtyard = OpenSource("sim:courtyard#cam1", {.fps = 5});
+  ASSERT_TRUE(courtyard.ok()) << courtyard.status();
+  EXPECT_TRUE((*courtyard)->Next().ok());
+  const std::string path = (std::filesystem::temp_directory_path() / "ave_source_scenario.yaml").string();
+  {
+    std::ofstream out(path);
+    out << "name: tiny\ncameras:\n  - {id: c, width: 64, height: 48, position: [0, -10], height_above_ground_m: 2, look_at: [0, 0]}\n";
+  }
+  auto file = OpenSource("sim:" + path + "#c", {.fps = 5});
+  ASSERT_TRUE(file.ok()) << file.status();
+  auto frame = (*file)->Next();
+  ASSERT_TRUE(frame.ok());
+  EXPECT_EQ(frame->width, 64);
+  {
+    std::ofstream out(path);
+    out << "name: tiny\ncameras:\n  - {id: c, fps: -1, position: [0, -10], look_at: [0, 0]}\n";
+  }
+  EXPECT_THAT(std::string(OpenSource("sim:" + path + "#c", {}).status().message()),
+              HasSubstr("ave_source_scenario.yaml:3: cameras[0].fps: must be > 0"));
+  std::filesystem::remove(path);
+}
+
 TEST(OpenSource, BadSpecsNameTheProblem) {
   EXPECT_THAT(std::string(OpenSource("sim:campus#nope", {}).status().message()), HasSubstr("no camera 'nope'"));
-  EXPECT_THAT(std::string(OpenSource("sim:mars#cam1", {}).status().message()), HasSubstr("unknown scene"));
+  EXPECT_THAT(std::string(OpenSource("sim:mars#cam1", {}).status().message()), HasSubstr("unknown scenario"));
   EXPECT_THAT(std::string(OpenSource("ftp://x", {}).status().message()), HasSubstr("unknown scheme"));
   EXPECT_THAT(std::string(OpenSource("file:/no/such/video.avi", {}).status().message()), HasSubstr("cannot open"));
   EXPECT_THAT(std::string(OpenSource("sim:campus#cam1", {.fps = 0}).status().message()), HasSubstr("fps"));
