@@ -3,8 +3,11 @@
 # synthetic campus: ave-server on an embedded SQLite store, the three campus cameras registered
 # through the admin API, three simulated camera agents, and a viewer — a window when DISPLAY is
 # set, otherwise headless, writing a quad-view PNG — then stops everything cleanly.
+# Every channel uses TLS with a site CA made by deploy/make-certs.sh; the sensors also present
+# client certificates (mutual TLS) and each streams with its own camera-bound token issued through
+# the admin API (the server keeps only the tokens' SHA-256).
 #   sudo deploy/demo.sh                 (AVE_SKIP_DEPS=1 skips the package check)
-# Output: ${AVE_DEMO_OUT:-build/demo}/quad.png, server.log, agent-*.log, ave.db
+# Output: ${AVE_DEMO_OUT:-build/demo}/quad.png, server.log, agent-*.log, ave.db, certs/
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 build=${AVE_BUILD_DIR:-$root/build}
@@ -20,6 +23,10 @@ export AVE_SENSOR_TOKEN=${AVE_SENSOR_TOKEN:-$(token)}
 export AVE_VIEWER_TOKEN=${AVE_VIEWER_TOKEN:-$(token)}
 export AVE_ADMIN_TOKEN=${AVE_ADMIN_TOKEN:-$(token)}
 
+certs=$out/certs
+bash "$root/deploy/make-certs.sh" "$certs" cam1 cam2 cam3 >/dev/null
+export AVE_TLS_CA=$certs/ca.pem  # ave-admin, ave-agent and ave-viewer trust the site CA
+
 pids=()
 cleanup() {
   local status=$?
@@ -30,7 +37,9 @@ cleanup() {
 trap cleanup EXIT INT TERM
 
 echo "demo: starting ave-server (store $out/ave.db)"
-"$bin/ave-server" --listen 127.0.0.1:0 --store "$out/ave.db" >"$out/server.out" 2>"$out/server.log" &
+"$bin/ave-server" --listen 127.0.0.1:0 --store "$out/ave.db" \
+  --tls-cert "$certs/server.pem" --tls-key "$certs/server.key" --tls-client-ca "$certs/ca.pem" --sensor-client-cert \
+  --metrics-listen 127.0.0.1:0 >"$out/server.out" 2>"$out/server.log" &
 server_pid=$!
 pids+=("$server_pid")
 port=""
@@ -42,11 +51,14 @@ for _ in $(seq 1 200); do
 done
 [ -n "$port" ] || { echo "demo: ave-server did not report its port" >&2; exit 1; }
 server=127.0.0.1:$port
-echo "demo: server on $server; registering the campus cameras"
+echo "demo: server on $server (TLS); registering the campus cameras"
 "$bin/ave-admin" --server "$server" import-campus
 
 for cam in cam1 cam2 cam3; do
+  # A token bound to this camera only (printed once by the server, kept here in memory).
+  cam_token=$("$bin/ave-admin" --server "$server" issue-token --role sensor --camera "$cam" --label "demo $cam" 2>/dev/null)
   "$bin/ave-agent" --server "$server" --camera "$cam" --source "sim:campus#$cam" --fps "${AVE_DEMO_FPS:-10}" \
+    --token "$cam_token" --tls-cert "$certs/sensor-$cam.pem" --tls-key "$certs/sensor-$cam.key" \
     >"$out/agent-$cam.out" 2>"$out/agent-$cam.log" &
   pids+=("$!")
 done
@@ -63,4 +75,9 @@ else
 fi
 echo "demo: quad view written to $out/quad.png"
 "$bin/ave-admin" --server "$server" list >"$out/cameras.json"
+metrics_port=$(sed -n 's/^metrics on port \([0-9]*\)$/\1/p' "$out/server.out" | head -1)
+if [ -n "$metrics_port" ]; then
+  python3 -c "import sys, urllib.request; sys.stdout.write(urllib.request.urlopen(sys.argv[1], timeout=5).read().decode())" \
+    "http://127.0.0.1:$metrics_port/metrics" >"$out/metrics.txt" || true
+fi
 echo "demo: stopping"

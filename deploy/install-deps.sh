@@ -14,6 +14,8 @@ PACKAGES=(
   libglfw3-dev libglm-dev libepoxy-dev libegl-dev libgl-dev libgl1-mesa-dri libegl-mesa0 xvfb xauth
   # store
   libsqlite3-dev libopenexr-dev libabsl-dev
+  # security: TLS certificates (openssl CLI), token hashing (libcrypto)
+  openssl libssl-dev
   # command lines, JSON
   libcli11-dev nlohmann-json3-dev libyaml-cpp-dev
   # tests and benchmarks

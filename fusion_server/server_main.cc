@@ -23,6 +23,8 @@ int main(int argc, char** argv) {
   options.sensor_token = EnvOr("AVE_SENSOR_TOKEN", "");
   options.viewer_token = EnvOr("AVE_VIEWER_TOKEN", "");
   options.admin_token = EnvOr("AVE_ADMIN_TOKEN", "");
+  options.tls.cert_file = EnvOr("AVE_TLS_CERT", "");
+  options.tls.key_file = EnvOr("AVE_TLS_KEY", "");
   double max_frame_mb = 8;
   std::string log_level = "info";
 
@@ -33,6 +35,21 @@ int main(int argc, char** argv) {
   app.add_option("--sensor-token", options.sensor_token, "bearer token sensors present (env AVE_SENSOR_TOKEN)");
   app.add_option("--viewer-token", options.viewer_token, "bearer token viewers present (env AVE_VIEWER_TOKEN)");
   app.add_option("--admin-token", options.admin_token, "bearer token administrators present (env AVE_ADMIN_TOKEN)");
+  app.add_option("--tls-cert", options.tls.cert_file, "PEM server certificate: serve TLS (env AVE_TLS_CERT)");
+  app.add_option("--tls-key", options.tls.key_file, "PEM server private key (env AVE_TLS_KEY)");
+  app.add_option("--tls-client-ca", options.tls.client_ca_file,
+                 "PEM CA for client certificates: enables mutual TLS for clients that present one");
+  app.add_flag("--require-client-cert", options.tls.require_client_cert,
+               "refuse TLS handshakes without a client certificate (every client)");
+  app.add_flag("--sensor-client-cert", options.sensor_requires_client_cert,
+               "sensors must present a verified client certificate (mutual TLS for sensor nodes)");
+  app.add_option("--metrics-listen", options.metrics_listen,
+                 "host:port for Prometheus text metrics over HTTP (GET /metrics); empty = off");
+  app.add_option("--max-ingest-fps", options.flow.max_ingest_fps,
+                 "server-wide frame budget: sensors are asked to share it (0 = unlimited)")->capture_default_str();
+  app.add_option("--max-ingest-mbps", options.flow.max_ingest_mbps,
+                 "server-wide JPEG byte budget, MB/s: above it sensors are asked for a lower quality (0 = unlimited)")
+      ->capture_default_str();
   app.add_option("--max-frame-mb", max_frame_mb, "largest JPEG accepted, MiB")->capture_default_str()->check(CLI::Range(0.01, 15.0));
   app.add_option("--max-fps-hint", options.max_fps_hint, "frame rate asked of sensors (0 = any)")->capture_default_str();
   app.add_option("--campus-grid", options.campus_grid_m, "terrain grid (m) when seeding the built-in campus")
@@ -59,6 +76,7 @@ int main(int argc, char** argv) {
     return 1;
   }
   std::cout << "listening on port " << (*server)->port() << std::endl;
+  if ((*server)->metrics_port() != 0) std::cout << "metrics on port " << (*server)->metrics_port() << std::endl;
   std::thread waiter([&] {
     int sig = 0;
     sigwait(&signals, &sig);

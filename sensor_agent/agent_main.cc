@@ -21,6 +21,7 @@ void OnSignal(int) { g_stop = true; }
 int main(int argc, char** argv) {
   ave::AgentOptions options;
   if (const char* t = std::getenv("AVE_SENSOR_TOKEN")) options.token = t;
+  if (const char* ca = std::getenv("AVE_TLS_CA")) options.tls.ca_file = ca;
   std::string source_spec;
   std::string position, look_at;
   double fov_deg = 60;
@@ -33,6 +34,14 @@ int main(int argc, char** argv) {
   app.add_option("--jpeg-quality", options.jpeg_quality, "JPEG quality 1..100")->capture_default_str()->check(CLI::Range(1, 100));
   app.add_option("--max-frames", options.max_frames, "stop after N frames (0 = never)")->capture_default_str();
   app.add_option("--duration", options.duration_s, "stop after S seconds (0 = never)")->capture_default_str();
+  app.add_option("--tls-ca", options.tls.ca_file, "PEM CA of the server certificate: use TLS (env AVE_TLS_CA)");
+  app.add_option("--tls-cert", options.tls.cert_file, "PEM client certificate of this sensor node (mutual TLS)");
+  app.add_option("--tls-key", options.tls.key_file, "PEM client key of this sensor node (mutual TLS)");
+  app.add_option("--tls-server-name", options.tls.server_name, "name the server certificate carries, if not the host dialled");
+  app.add_option("--spill", options.spill_path,
+                 "file for metadata buffered during long outages (default: temp dir; '-' = memory only)");
+  app.add_option("--metadata-buffer", options.metadata_in_memory, "metadata records kept in memory during an outage")
+      ->capture_default_str()->check(CLI::Range(1, 1 << 24));
   app.add_option("--position", position, "mounting position x,y,z (m, site frame) for sources without a pose");
   app.add_option("--look-at", look_at, "point x,y,z the mounted camera looks at");
   app.add_option("--fov", fov_deg, "horizontal field of view (deg) for sources without intrinsics")->capture_default_str();
@@ -67,7 +76,9 @@ int main(int argc, char** argv) {
   const ave::AgentStats s = streamer.stats();
   std::cout << "{\"camera\":\"" << options.camera_id << "\",\"frames_sent\":" << s.frames_sent
             << ",\"frames_acked\":" << s.frames_acked << ",\"connects\":" << s.connects
-            << ",\"bytes_sent\":" << s.bytes_sent << "}" << std::endl;
+            << ",\"bytes_sent\":" << s.bytes_sent << ",\"metadata_buffered\":" << s.metadata_buffered
+            << ",\"metadata_replayed\":" << s.metadata_replayed << ",\"metadata_dropped\":" << s.metadata_dropped
+            << ",\"clock_offset_ms\":" << s.clock_offset_ns / 1e6 << "}" << std::endl;
   if (!status.ok()) {
     std::cerr << "ave-agent: " << status.message() << "\n";
     return 1;

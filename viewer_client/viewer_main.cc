@@ -11,10 +11,15 @@
 int main(int argc, char** argv) {
   ave::viewer::ViewerOptions options;
   if (const char* t = std::getenv("AVE_VIEWER_TOKEN")) options.token = t;
+  if (const char* ca = std::getenv("AVE_TLS_CA")) options.tls_ca = ca;
   std::string eye, target, size = "1280x720";
   CLI::App app{"ave-viewer: AVE control-room viewer (quad view: browse + three camera-locked views)"};
   app.add_option("--server", options.server, "fusion server host:port")->capture_default_str();
   app.add_option("--token", options.token, "viewer bearer token (env AVE_VIEWER_TOKEN)");
+  app.add_option("--tls-ca", options.tls_ca, "PEM CA of the server certificate: use TLS (env AVE_TLS_CA)");
+  app.add_option("--tls-cert", options.tls_cert, "PEM client certificate (mutual TLS)");
+  app.add_option("--tls-key", options.tls_key, "PEM client key (mutual TLS)");
+  app.add_option("--tls-server-name", options.tls_server_name, "name the server certificate carries, if not the host dialled");
   app.add_option("--id", options.viewer_id, "this viewer's name in the server log")->capture_default_str();
   app.add_flag("--headless", options.headless, "render offscreen (EGL) once and exit");
   app.add_option("--snapshot", options.snapshot_path, "PNG to write (headless: required)");

@@ -54,6 +54,36 @@ absl::StatusOr<std::vector<v1::Camera>> AdminClient::ListCameras() {
   return std::vector<v1::Camera>(response.cameras().begin(), response.cameras().end());
 }
 
+absl::StatusOr<v1::IssueTokenResponse> AdminClient::IssueToken(const std::string& role, const std::string& camera_id,
+                                                              const std::string& label) {
+  grpc::ClientContext context;
+  Authorize(context);
+  v1::IssueTokenRequest request;
+  request.set_role(role);
+  request.set_camera_id(camera_id);
+  request.set_label(label);
+  v1::IssueTokenResponse response;
+  if (absl::Status s = FromGrpc(stub_->IssueToken(&context, request, &response)); !s.ok()) return s;
+  return response;
+}
+
+absl::Status AdminClient::RevokeToken(const std::string& token_id) {
+  grpc::ClientContext context;
+  Authorize(context);
+  v1::RevokeTokenRequest request;
+  request.set_token_id(token_id);
+  v1::RevokeTokenResponse response;
+  return FromGrpc(stub_->RevokeToken(&context, request, &response));
+}
+
+absl::StatusOr<std::vector<v1::TokenInfo>> AdminClient::ListTokens() {
+  grpc::ClientContext context;
+  Authorize(context);
+  v1::ListTokensResponse response;
+  if (absl::Status s = FromGrpc(stub_->ListTokens(&context, v1::ListTokensRequest(), &response)); !s.ok()) return s;
+  return std::vector<v1::TokenInfo>(response.tokens().begin(), response.tokens().end());
+}
+
 v1::Camera CampusCameraRecord(const scene::CameraSpec& spec) {
   v1::Camera camera;
   camera.set_id(spec.id);

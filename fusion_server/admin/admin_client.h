@@ -20,6 +20,11 @@ class AdminClient {
   absl::StatusOr<v1::Camera> UpdateCamera(const v1::Camera& camera);
   absl::Status RemoveCamera(const std::string& id);
   absl::StatusOr<std::vector<v1::Camera>> ListCameras();
+  // Tokens (issue 8): the new token is in the response, once; the server keeps only its hash.
+  absl::StatusOr<v1::IssueTokenResponse> IssueToken(const std::string& role, const std::string& camera_id,
+                                                    const std::string& label = {});
+  absl::Status RevokeToken(const std::string& token_id);
+  absl::StatusOr<std::vector<v1::TokenInfo>> ListTokens();
 
  private:
   void Authorize(grpc::ClientContext& context) const;

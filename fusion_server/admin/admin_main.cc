@@ -4,6 +4,9 @@
 //   ave-admin update-camera ... (same flags; every field is replaced)
 //   ave-admin remove-camera --id cam9
 //   ave-admin import-campus            (registers the built-in campus cameras, skipping existing ones)
+//   ave-admin issue-token --role sensor --camera cam1   (prints the new token once)
+//   ave-admin revoke-token --id 3f2a9c01b7e4 | list-tokens
+// TLS: --tls-ca ca.pem (and --tls-cert/--tls-key for mutual TLS); env AVE_TLS_CA.
 #include <cstdlib>
 #include <iostream>
 #include <sstream>
@@ -11,6 +14,7 @@
 #include <google/protobuf/util/json_util.h>
 #include <nlohmann/json.hpp>
 
+#include "ave/net/tls.h"
 #include "fusion_server/admin/admin_client.h"
 #include "fusion_server/core/convert.h"
 #include "model_store/common/cli.h"
@@ -31,6 +35,12 @@ int main(int argc, char** argv) {
   CLI::App app{"ave-admin: manage the cameras of an AVE fusion server"};
   app.add_option("--server", server, "server host:port")->capture_default_str();
   app.add_option("--token", token, "admin bearer token (env AVE_ADMIN_TOKEN)");
+  ave::net::TlsClientOptions tls;
+  if (const char* ca = std::getenv("AVE_TLS_CA")) tls.ca_file = ca;
+  app.add_option("--tls-ca", tls.ca_file, "PEM CA of the server certificate: use TLS (env AVE_TLS_CA)");
+  app.add_option("--tls-cert", tls.cert_file, "PEM client certificate (mutual TLS)");
+  app.add_option("--tls-key", tls.key_file, "PEM client key (mutual TLS)");
+  app.add_option("--tls-server-name", tls.server_name, "name the server certificate carries, if not the host dialled");
   app.require_subcommand(1);
 
   app.add_subcommand("list", "list registered cameras as JSON");
@@ -55,9 +65,46 @@ int main(int argc, char** argv) {
   CLI::App* remove = app.add_subcommand("remove-camera", "remove a camera");
   remove->add_option("--id", id, "camera id")->required();
   app.add_subcommand("import-campus", "register the built-in campus cameras (existing ids are skipped)");
+  std::string role, label, token_id;
+  CLI::App* issue = app.add_subcommand("issue-token", "issue a bearer token; prints it once (the server keeps its hash)");
+  issue->add_option("--role", role, "sensor, viewer or admin")->required()->check(CLI::IsMember({"sensor", "viewer", "admin"}));
+  issue->add_option("--camera", id, "the camera a sensor token may stream as");
+  issue->add_option("--label", label, "free text naming the holder");
+  CLI::App* revoke = app.add_subcommand("revoke-token", "revoke tokens by id (a prefix of the hash, 8+ hex)");
+  revoke->add_option("--id", token_id, "token id as issue-token / list-tokens print it")->required();
+  app.add_subcommand("list-tokens", "list issued tokens (ids, roles, cameras; never the tokens) as JSON");
 
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-admin")) return *exit_code;
-  ave::AdminClient client(grpc::CreateChannel(server, grpc::InsecureChannelCredentials()), token);
+  absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = ave::net::MakeChannel(server, tls);
+  if (!channel.ok()) return Fail(std::string(channel.status().message()));
+  ave::AdminClient client(*channel, token);
+
+  if (app.got_subcommand("issue-token")) {
+    auto issued = client.IssueToken(role, id, label);
+    if (!issued.ok()) return Fail(std::string(issued.status().message()));
+    std::cerr << "issued " << issued->info().role() << " token " << issued->info().token_id()
+              << (issued->info().camera_id().empty() ? "" : " for camera " + issued->info().camera_id())
+              << " (shown once)\n";
+    std::cout << issued->token() << "\n";
+    return 0;
+  }
+  if (app.got_subcommand("revoke-token")) {
+    if (absl::Status s = client.RevokeToken(token_id); !s.ok()) return Fail(std::string(s.message()));
+    std::cout << "revoked " << token_id << "\n";
+    return 0;
+  }
+  if (app.got_subcommand("list-tokens")) {
+    auto tokens = client.ListTokens();
+    if (!tokens.ok()) return Fail(std::string(tokens.status().message()));
+    nlohmann::json out = nlohmann::json::array();
+    for (const auto& t : *tokens) {
+      std::string json;
+      (void)google::protobuf::util::MessageToJsonString(t, &json);
+      out.push_back(nlohmann::json::parse(json));
+    }
+    std::cout << out.dump(2) << "\n";
+    return 0;
+  }
 
   if (app.got_subcommand("list")) {
     auto cameras = client.ListCameras();

@@ -63,10 +63,33 @@ absl::Status SceneState::AcceptFrame(const std::string& id, std::shared_ptr<cons
   std::lock_guard lock(mu_);
   auto it = cameras_.find(id);
   if (it == cameras_.end()) return absl::NotFoundError(absl::StrCat("camera '", id, "' is not registered"));
+  if (frame->metadata_only()) {
+    ++it->second.metadata;
+    return absl::OkStatus();
+  }
+  ++it->second.accepted;
   it->second.latest = std::move(frame);
   it->second.latest_received_ns = received_ns;
   BumpLocked();
   return absl::OkStatus();
+}
+
+uint64_t SceneState::AcceptedCount(const std::string& id) const {
+  std::lock_guard lock(mu_);
+  auto it = cameras_.find(id);
+  return it == cameras_.end() ? 0 : it->second.accepted;
+}
+
+uint64_t SceneState::MetadataCount(const std::string& id) const {
+  std::lock_guard lock(mu_);
+  auto it = cameras_.find(id);
+  return it == cameras_.end() ? 0 : it->second.metadata;
+}
+
+int SceneState::OpenStreams(const std::string& id) const {
+  std::lock_guard lock(mu_);
+  auto it = cameras_.find(id);
+  return it == cameras_.end() ? 0 : it->second.open_streams;
 }
 
 std::shared_ptr<const v1::SensorFrame> SceneState::LatestFrame(const std::string& id) const {
@@ -101,6 +124,8 @@ v1::SceneUpdate SceneState::BuildUpdate(const std::vector<std::string>& camera_i
   std::lock_guard lock(mu_);
   v1::SceneUpdate update;
   update.set_server_time_ns(now_ns);
+  cursor.last_sent.clear();
+  cursor.last_skipped = 0;
   auto wanted = [&](const std::string& id) {
     return camera_ids.empty() || std::find(camera_ids.begin(), camera_ids.end(), id) != camera_ids.end();
   };
@@ -131,20 +156,34 @@ v1::SceneUpdate SceneState::BuildUpdate(const std::vector<std::string>& camera_i
       cam->set_status(v1::CAMERA_STATUS_LOST);
     }
     if (live.latest) {
+      const int64_t capture_server_ns = live.latest->capture_time_ns() + live.latest->clock_offset_ns();
       cam->set_frame_capture_time_ns(live.latest->capture_time_ns());
+      cam->set_frame_capture_server_time_ns(capture_server_ns);
       cam->set_frame_sequence(live.latest->sequence());
       *cam->mutable_boxes() = live.latest->boxes();
       uint64_t& sent = cursor.sent_sequence[id];
       if (include_jpeg && live.latest->sequence() != sent && !live.latest->jpeg().empty()) {
         cam->set_jpeg(live.latest->jpeg());
         sent = live.latest->sequence();
+        auto [slot, first] = cursor.sent_accepted.try_emplace(id, live.accepted);
+        // Frames that arrived after the previous send and were replaced before this one.
+        if (!first && live.accepted > slot->second + 1) {
+          const uint64_t skipped = live.accepted - slot->second - 1;
+          cursor.skipped[id] += skipped;
+          cursor.last_skipped += skipped;
+        }
+        slot->second = live.accepted;
+        cursor.last_sent.emplace_back(live.latest_received_ns, capture_server_ns);
       }
+      cam->set_frames_skipped(cursor.skipped[id]);
     }
   }
   for (const std::string& id : cursor.known_cameras) {
     if (!present.count(id)) {
       update.add_removed_camera_ids(id);
       cursor.sent_sequence.erase(id);
+      cursor.sent_accepted.erase(id);
+      cursor.skipped.erase(id);
     }
   }
   cursor.known_cameras = std::move(present);

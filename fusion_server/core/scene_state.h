@@ -39,9 +39,16 @@ struct SceneStateOptions {
 };
 
 // What one subscriber has been sent so far (sequence per camera), so that JPEGs go out once.
+// Each viewer has in effect a one-slot queue per camera: a newer frame replaces an unsent one, and
+// the replaced frames are counted as skipped for this viewer only.
 struct ViewerCursor {
   std::map<std::string, uint64_t> sent_sequence;
+  std::map<std::string, uint64_t> sent_accepted;  // the camera's accepted-frame count at the last send
+  std::map<std::string, uint64_t> skipped;        // frames skipped per camera, cumulative
   std::set<std::string> known_cameras;
+  // Filled by BuildUpdate for the JPEGs it put in the update: (received_ns, capture on the server clock).
+  std::vector<std::pair<int64_t, int64_t>> last_sent;
+  uint64_t last_skipped = 0;  // frames skipped by the last BuildUpdate
 };
 
 class SceneState {
@@ -58,7 +65,14 @@ class SceneState {
   void StreamClosed(const std::string& id);
 
   // Keeps `frame` as the camera's latest. NotFound when the camera is not (or no longer) registered.
+  // A metadata-only frame (replayed after an outage) is counted but does not replace the latest
+  // image. The frame's clock_offset_ns, when set, places its capture time on the server clock.
   absl::Status AcceptFrame(const std::string& id, std::shared_ptr<const v1::SensorFrame> frame, int64_t received_ns);
+
+  // Frames with a JPEG accepted for a camera since it was registered (0 for an unknown camera).
+  uint64_t AcceptedCount(const std::string& id) const;
+  uint64_t MetadataCount(const std::string& id) const;
+  int OpenStreams(const std::string& id) const;
 
   // The latest accepted frame of a camera, if any.
   std::shared_ptr<const v1::SensorFrame> LatestFrame(const std::string& id) const;
@@ -83,6 +97,8 @@ class SceneState {
     int open_streams = 0;
     std::shared_ptr<const v1::SensorFrame> latest;
     int64_t latest_received_ns = 0;
+    uint64_t accepted = 0;
+    uint64_t metadata = 0;
   };
   void BumpLocked();
 

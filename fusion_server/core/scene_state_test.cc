@@ -83,5 +83,55 @@ TEST(SceneState, WaitersWakeOnChangeAndShutdown) {
   EXPECT_FALSE(state.WaitForChange(state.version(), std::chrono::seconds(5)));
 }
 
+TEST(SceneState, SlowViewerSkipsOldFramesForItselfOnlyAndCountsThem) {
+  SceneState state;
+  state.UpsertCamera(Camera("a"));
+  ViewerCursor fast, slow;
+  uint64_t fast_skipped = 0;
+  ASSERT_TRUE(state.AcceptFrame("a", Frame(1), 10).ok());
+  state.BuildUpdate({}, true, 0, fast);
+  state.BuildUpdate({}, true, 0, slow);
+  for (uint64_t seq = 2; seq <= 6; ++seq) {
+    ASSERT_TRUE(state.AcceptFrame("a", Frame(seq), 10).ok());
+    state.BuildUpdate({}, true, 0, fast);  // the fast viewer takes every frame
+    fast_skipped += fast.last_skipped;
+  }
+  const v1::SceneUpdate u = state.BuildUpdate({}, true, 0, slow);  // the slow one only now
+  EXPECT_EQ(u.cameras(0).frame_sequence(), 6u);
+  // The slow viewer last got frame 1; frames 2..5 were replaced before it asked again.
+  EXPECT_EQ(u.cameras(0).frames_skipped(), 4u);
+  EXPECT_EQ(slow.last_skipped, 4u);
+  EXPECT_EQ(fast_skipped, 0u);
+  EXPECT_EQ(state.AcceptedCount("a"), 6u);
+  ASSERT_EQ(slow.last_sent.size(), 1u);
+  EXPECT_EQ(slow.last_sent[0].first, 10);
+}
+
+TEST(SceneState, MetadataOnlyFrameIsCountedButKeepsTheLatestImage) {
+  SceneState state;
+  state.UpsertCamera(Camera("a"));
+  ASSERT_TRUE(state.AcceptFrame("a", Frame(5, "image"), 0).ok());
+  auto meta = std::make_shared<v1::SensorFrame>();
+  meta->set_sequence(6);
+  meta->set_capture_time_ns(6000);
+  meta->set_metadata_only(true);
+  ASSERT_TRUE(state.AcceptFrame("a", meta, 0).ok());
+  EXPECT_EQ(state.LatestFrame("a")->jpeg(), "image");
+  EXPECT_EQ(state.MetadataCount("a"), 1u);
+  EXPECT_EQ(state.AcceptedCount("a"), 1u);
+}
+
+TEST(SceneState, ClockOffsetPlacesCaptureOnTheServerClock) {
+  SceneState state;
+  state.UpsertCamera(Camera("a"));
+  auto f = std::make_shared<v1::SensorFrame>(*Frame(1));
+  f->set_clock_offset_ns(-250);
+  ASSERT_TRUE(state.AcceptFrame("a", f, 0).ok());
+  ViewerCursor cursor;
+  const v1::SceneUpdate u = state.BuildUpdate({}, true, 0, cursor);
+  EXPECT_EQ(u.cameras(0).frame_capture_time_ns(), 1000);
+  EXPECT_EQ(u.cameras(0).frame_capture_server_time_ns(), 750);
+}
+
 }  // namespace
 }  // namespace ave

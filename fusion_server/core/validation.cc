@@ -9,6 +9,10 @@ namespace ave {
 namespace {
 
 constexpr int kMaxJpegSide = 16384;
+// Time stamps up to the year 2096 and clock offsets up to a day keep every sum of the two (and
+// differences with the server's clock) far inside int64.
+constexpr int64_t kMaxTimeNs = 4'000'000'000'000'000'000;
+constexpr int64_t kMaxClockOffsetNs = 86'400'000'000'000;
 
 }  // namespace
 
@@ -132,8 +136,16 @@ absl::Status ValidateFrame(const v1::SensorFrame& frame, const v1::Intrinsics& i
     return absl::InvalidArgumentError(
         absl::StrCat(where, "sequence must increase (last accepted ", last_sequence, ")"));
   }
-  if (frame.capture_time_ns() <= 0) {
-    return absl::InvalidArgumentError(absl::StrCat(where, "capture_time_ns must be > 0"));
+  if (frame.capture_time_ns() <= 0 || frame.capture_time_ns() > kMaxTimeNs) {
+    return absl::InvalidArgumentError(absl::StrCat(where, "capture_time_ns must be in (0, ", kMaxTimeNs, "]"));
+  }
+  // Found by ave_fuzz_sensor_message: an unbounded offset overflowed capture + offset (UB).
+  if (frame.clock_offset_ns() < -kMaxClockOffsetNs || frame.clock_offset_ns() > kMaxClockOffsetNs) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(where, "clock_offset_ns must be within +-", kMaxClockOffsetNs, " ns (one day)"));
+  }
+  if (frame.metadata_only() && !frame.jpeg().empty()) {
+    return absl::InvalidArgumentError(absl::StrCat(where, "a metadata_only frame must not carry a jpeg"));
   }
   if (frame.has_pose()) {
     if (absl::Status s = ValidatePose(frame.pose(), absl::StrCat(where, "pose")); !s.ok()) return s;

@@ -39,6 +39,7 @@ absl::Status ValidateHello(const v1::SensorHello& hello);
 absl::Status ValidatePose(const v1::Pose& pose, const std::string& field);
 
 // One frame of an accepted stream. `last_sequence` is the last accepted sequence (0: none yet).
+// capture_time_ns must be in (0, 4e18] and clock_offset_ns within one day either way.
 absl::Status ValidateFrame(const v1::SensorFrame& frame, const v1::Intrinsics& intrinsics, uint64_t last_sequence,
                            const FrameLimits& limits);
 

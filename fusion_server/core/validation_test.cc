@@ -90,6 +90,28 @@ TEST(ValidateFrame, RejectsRepeatedSequenceSizeMismatchAndOversize) {
   EXPECT_THAT(std::string(ValidateFrame(boxed, Intrinsics(64, 48), 0, {}).message()), HasSubstr("boxes[0]"));
 }
 
+// Regression for a libFuzzer finding (ave_fuzz_sensor_message): capture time plus an unbounded
+// clock offset overflowed int64 downstream.
+TEST(ValidateFrame, RejectsTimeStampsAndClockOffsetsThatCouldOverflow) {
+  v1::SensorFrame f = GoodFrame(1);
+  f.set_clock_offset_ns(9'223'372'036'854'775'803);
+  EXPECT_THAT(std::string(ValidateFrame(f, Intrinsics(64, 48), 0, {}).message()), HasSubstr("clock_offset_ns"));
+  f.set_clock_offset_ns(-9'223'372'036'854'775'807 - 1);
+  EXPECT_THAT(std::string(ValidateFrame(f, Intrinsics(64, 48), 0, {}).message()), HasSubstr("clock_offset_ns"));
+  f.set_clock_offset_ns(-5'000'000'000);  // a 5 s skew is fine
+  EXPECT_TRUE(ValidateFrame(f, Intrinsics(64, 48), 0, {}).ok());
+  f.set_capture_time_ns(9'000'000'000'000'000'000);
+  EXPECT_THAT(std::string(ValidateFrame(f, Intrinsics(64, 48), 0, {}).message()), HasSubstr("capture_time_ns"));
+}
+
+TEST(ValidateFrame, MetadataOnlyFramesCarryNoJpeg) {
+  v1::SensorFrame f = GoodFrame(1);
+  f.set_metadata_only(true);
+  EXPECT_THAT(std::string(ValidateFrame(f, Intrinsics(64, 48), 0, {}).message()), HasSubstr("metadata_only"));
+  f.clear_jpeg();
+  EXPECT_TRUE(ValidateFrame(f, Intrinsics(64, 48), 0, {}).ok());
+}
+
 TEST(ValidateHello, NamesTheField) {
   v1::SensorHello hello;
   hello.set_camera_id("cam 1");

@@ -39,9 +39,21 @@ CameraEntry ToEntry(const store::CameraRecord& r) {
   return e;
 }
 
+void AdminServiceImpl::Audit(const Principal& who, const grpc::ServerContext& context, const std::string& action,
+                             const std::string& target, const std::string& before, const std::string& after) {
+  // Who: the token's id (a hash prefix, never the token) and the peer address.
+  const std::string actor = absl::StrCat(RoleName(who.role), ":", who.token_id, who.bootstrap ? " (bootstrap)" : "",
+                                         "@", context.peer());
+  if (auto s = store_.AppendAudit(actor, action, target, before, after); !s.ok()) {
+    AVE_LOG(ERROR) << "audit write failed: " << s.status().message();
+  }
+  AVE_LOG(INFO) << action << " '" << target << "' by " << actor;
+}
+
 grpc::Status AdminServiceImpl::Upsert(grpc::ServerContext* context, const v1::Camera& camera, bool add,
                                       v1::Camera* response) {
-  if (grpc::Status s = CheckBearer(*context, options_.admin_token, "admin"); !s.ok()) return s;
+  Principal principal;
+  if (grpc::Status s = AuthorizeCall(shared_, *context, Action::kManageCameras, {}, {}, &principal); !s.ok()) return s;
   const std::string who = absl::StrCat("camera '", camera.id(), "': ");
   if (!IsValidCameraId(camera.id())) {
     return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "camera.id must be 1..64 characters of [A-Za-z0-9_.-]");
@@ -74,12 +86,7 @@ grpc::Status AdminServiceImpl::Upsert(grpc::ServerContext* context, const v1::Ca
   if (absl::Status s = add ? store_.AddCamera(record) : store_.UpdateCamera(record); !s.ok()) return ToGrpc(s);
   state_.UpsertCamera(ToEntry(record));
   *response = ToProto(record);
-  const std::string actor = "admin@" + context->peer();
-  if (auto s = store_.AppendAudit(actor, add ? "AddCamera" : "UpdateCamera", record.id, before, ToJson(*response));
-      !s.ok()) {
-    AVE_LOG(ERROR) << "audit write failed: " << s.status().message();
-  }
-  AVE_LOG(INFO) << (add ? "added" : "updated") << " camera '" << record.id << "' (" << actor << ")";
+  Audit(principal, *context, add ? "AddCamera" : "UpdateCamera", record.id, before, ToJson(*response));
   return grpc::Status::OK;
 }
 
@@ -95,25 +102,97 @@ grpc::Status AdminServiceImpl::UpdateCamera(grpc::ServerContext* context, const 
 
 grpc::Status AdminServiceImpl::RemoveCamera(grpc::ServerContext* context, const v1::RemoveCameraRequest* request,
                                             v1::RemoveCameraResponse*) {
-  if (grpc::Status s = CheckBearer(*context, options_.admin_token, "admin"); !s.ok()) return s;
+  Principal who;
+  if (grpc::Status s = AuthorizeCall(shared_, *context, Action::kManageCameras, {}, {}, &who); !s.ok()) return s;
+  if (!IsValidCameraId(request->id())) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "id must be 1..64 characters of [A-Za-z0-9_.-]");
+  }
   absl::StatusOr<store::CameraRecord> old = store_.GetCamera(request->id());
   if (!old.ok()) return ToGrpc(old.status());
   if (absl::Status s = store_.RemoveCamera(request->id()); !s.ok()) return ToGrpc(s);
   state_.RemoveCamera(request->id());
-  const std::string actor = "admin@" + context->peer();
-  if (auto s = store_.AppendAudit(actor, "RemoveCamera", request->id(), ToJson(ToProto(*old)), "{}"); !s.ok()) {
-    AVE_LOG(ERROR) << "audit write failed: " << s.status().message();
-  }
-  AVE_LOG(INFO) << "removed camera '" << request->id() << "' (" << actor << ")";
+  Audit(who, *context, "RemoveCamera", request->id(), ToJson(ToProto(*old)), "{}");
   return grpc::Status::OK;
 }
 
 grpc::Status AdminServiceImpl::ListCameras(grpc::ServerContext* context, const v1::ListCamerasRequest*,
                                            v1::ListCamerasResponse* response) {
-  if (grpc::Status s = CheckBearer(*context, options_.admin_token, "admin"); !s.ok()) return s;
+  if (grpc::Status s = AuthorizeCall(shared_, *context, Action::kManageCameras); !s.ok()) return s;
   absl::StatusOr<std::vector<store::CameraRecord>> cameras = store_.ListCameras();
   if (!cameras.ok()) return ToGrpc(cameras.status());
   for (const auto& c : *cameras) *response->add_cameras() = ToProto(c);
+  return grpc::Status::OK;
+}
+
+namespace {
+
+v1::TokenInfo ToInfo(const store::TokenRecord& t) {
+  v1::TokenInfo info;
+  info.set_token_id(t.hash.substr(0, 12));
+  info.set_role(t.role);
+  info.set_camera_id(t.camera_id);
+  info.set_label(t.label);
+  info.set_created_at_ns(t.created_at_ns);
+  info.set_revoked(t.revoked);
+  return info;
+}
+
+}  // namespace
+
+grpc::Status AdminServiceImpl::IssueToken(grpc::ServerContext* context, const v1::IssueTokenRequest* request,
+                                          v1::IssueTokenResponse* response) {
+  Principal who;
+  if (grpc::Status s = AuthorizeCall(shared_, *context, Action::kManageTokens, {}, {}, &who); !s.ok()) return s;
+  absl::StatusOr<Role> role = ParseRole(request->role());
+  if (!role.ok()) return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, std::string(role.status().message()));
+  if (*role == Role::kSensor) {
+    if (!IsValidCameraId(request->camera_id())) {
+      return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                          "camera_id: a sensor token is bound to one camera; give its id ([A-Za-z0-9_.-], 1..64)");
+    }
+    if (!state_.FindCamera(request->camera_id())) {
+      return grpc::Status(grpc::StatusCode::NOT_FOUND,
+                          absl::StrCat("camera '", request->camera_id(), "' is not registered (add it first)"));
+    }
+  } else if (!request->camera_id().empty()) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "camera_id is only for sensor tokens");
+  }
+  if (request->label().size() > 128) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "label longer than 128 characters");
+  }
+  absl::StatusOr<std::string> token = NewRandomToken();
+  if (!token.ok()) return ToGrpc(token.status());
+  store::TokenRecord record{HashToken(*token), request->role(), request->camera_id(), request->label()};
+  if (absl::Status s = store_.AddToken(record); !s.ok()) return ToGrpc(s);
+  shared_.tokens.Add(record.hash, Principal{*role, request->camera_id()});
+  response->set_token(*token);
+  *response->mutable_info() = ToInfo(record);
+  Audit(who, *context, "IssueToken", response->info().token_id(), "{}", ToJson(response->info()));
+  return grpc::Status::OK;
+}
+
+grpc::Status AdminServiceImpl::RevokeToken(grpc::ServerContext* context, const v1::RevokeTokenRequest* request,
+                                           v1::RevokeTokenResponse*) {
+  Principal who;
+  if (grpc::Status s = AuthorizeCall(shared_, *context, Action::kManageTokens, {}, {}, &who); !s.ok()) return s;
+  const std::string& id = request->token_id();
+  for (char c : id) {
+    if (!((c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'))) {
+      return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "token_id must be lowercase hex (a hash prefix)");
+    }
+  }
+  if (absl::Status s = store_.RevokeToken(id); !s.ok()) return ToGrpc(s);
+  shared_.tokens.Revoke(id);
+  Audit(who, *context, "RevokeToken", id, "{}", "{\"revoked\":true}");
+  return grpc::Status::OK;
+}
+
+grpc::Status AdminServiceImpl::ListTokens(grpc::ServerContext* context, const v1::ListTokensRequest*,
+                                          v1::ListTokensResponse* response) {
+  if (grpc::Status s = AuthorizeCall(shared_, *context, Action::kManageTokens); !s.ok()) return s;
+  absl::StatusOr<std::vector<store::TokenRecord>> tokens = store_.ListTokens();
+  if (!tokens.ok()) return ToGrpc(tokens.status());
+  for (const auto& t : *tokens) *response->add_tokens() = ToInfo(t);
   return grpc::Status::OK;
 }
 

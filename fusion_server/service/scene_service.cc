@@ -2,6 +2,7 @@
 #include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "fusion_server/core/validation.h"
 #include "fusion_server/service/services.h"
 #include "model_store/common/log.h"
 
@@ -9,12 +10,21 @@ namespace ave::internal {
 
 grpc::Status SceneServiceImpl::Subscribe(grpc::ServerContext* context, const v1::SubscribeRequest* request,
                                          grpc::ServerWriter<v1::SceneUpdate>* writer) {
-  if (grpc::Status s = CheckBearer(*context, options_.viewer_token, "viewer"); !s.ok()) return s;
+  if (grpc::Status s = AuthorizeCall(shared_, *context, Action::kSubscribe); !s.ok()) return s;
   if (request->viewer_id().size() > 128) {
     return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "viewer_id longer than 128 characters");
   }
   if (!std::isfinite(request->max_rate_hz()) || request->max_rate_hz() < 0) {
     return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "max_rate_hz must be finite and >= 0");
+  }
+  if (request->camera_ids_size() > 4096) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "camera_ids: at most 4096 cameras per subscription");
+  }
+  for (const std::string& id : request->camera_ids()) {
+    if (!IsValidCameraId(id)) {
+      return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                          "camera_ids: '" + id.substr(0, 80) + "' is not a camera id ([A-Za-z0-9_.-], 1..64)");
+    }
   }
   const std::vector<std::string> camera_ids(request->camera_ids().begin(), request->camera_ids().end());
   const float rate_hz = std::min(options_.max_viewer_rate_hz,
@@ -24,9 +34,13 @@ grpc::Status SceneServiceImpl::Subscribe(grpc::ServerContext* context, const v1:
   AVE_LOG(INFO) << "viewer '" << viewer << "' subscribed (" << (camera_ids.empty() ? std::string("all") : absl::StrCat(camera_ids.size()))
                 << " cameras, " << rate_hz << " Hz)";
 
+  ServerMetrics& metrics = shared_.metrics;
+  ++metrics.viewers_connected;
+  int64_t queue_depth = 0;  // this viewer's share of metrics.viewer_queue_depth
   ViewerCursor cursor;
   uint64_t seen = 0;
   uint64_t sent = 0;
+  uint64_t skipped = 0;
   auto next_send = std::chrono::steady_clock::now();
   while (!context->IsCancelled() && !state_.shut_down()) {
     const uint64_t version = state_.version();
@@ -38,16 +52,39 @@ grpc::Status SceneServiceImpl::Subscribe(grpc::ServerContext* context, const v1:
     next_send = std::chrono::steady_clock::now() + min_interval;
     seen = state_.version();
     v1::SceneUpdate update = state_.BuildUpdate(camera_ids, request->include_jpeg(), NowNs(), cursor);
+    // The frames in this update waited in the viewer's one-per-camera slots.
+    const int64_t depth = static_cast<int64_t>(cursor.last_sent.size());
+    metrics.viewer_queue_depth += depth - queue_depth;
+    queue_depth = depth;
+    size_t bytes = 0;
+    for (const auto& cam : update.cameras()) bytes += cam.jpeg().size();
+    // A sync Write blocks only this viewer's handler while its link is full: other viewers and the
+    // sensors carry on, and frames arriving meanwhile replace each other in this viewer's slots.
     if (!writer->Write(update)) break;
+    const int64_t written_ns = NowNs();
+    for (const auto& [received_ns, capture_ns] : cursor.last_sent) {
+      metrics.ingest_to_send_s.Observe((written_ns - received_ns) * 1e-9);
+      metrics.capture_to_send_s.Observe((written_ns - capture_ns) * 1e-9);
+    }
+    metrics.frames_out += cursor.last_sent.size();
+    metrics.bytes_out += bytes;
+    metrics.viewer_drops += cursor.last_skipped;
+    metrics.updates_out += 1;
+    shared_.viewer_sent.Add(cursor.last_sent.size());
+    if (cursor.last_skipped) shared_.viewer_skipped.Add(cursor.last_skipped);
+    skipped += cursor.last_skipped;
     ++sent;
   }
-  AVE_LOG(INFO) << "viewer '" << viewer << "' left after " << sent << " updates";
+  metrics.viewer_queue_depth -= queue_depth;
+  --metrics.viewers_connected;
+  AVE_LOG(INFO) << "viewer '" << viewer << "' left after " << sent << " updates (" << skipped
+                << " frames skipped for it)";
   return grpc::Status::OK;
 }
 
 grpc::Status SceneServiceImpl::GetStaticModel(grpc::ServerContext* context, const v1::StaticModelRequest* request,
                                               grpc::ServerWriter<v1::StaticModelChunk>* writer) {
-  if (grpc::Status s = CheckBearer(*context, options_.viewer_token, "viewer"); !s.ok()) return s;
+  if (grpc::Status s = AuthorizeCall(shared_, *context, Action::kReadModel); !s.ok()) return s;
   if (chunks_.empty()) return grpc::Status(grpc::StatusCode::NOT_FOUND, "the store holds no static model");
   for (const auto& chunk : chunks_) {
     if (!writer->Write(chunk)) return grpc::Status(grpc::StatusCode::CANCELLED, "viewer went away");

@@ -12,20 +12,60 @@ grpc::Status ToGrpc(const absl::Status& status) {
   return grpc::Status(static_cast<grpc::StatusCode>(status.code()), std::string(status.message()));
 }
 
-grpc::Status CheckBearer(const grpc::ServerContext& context, const std::string& expected, const char* role) {
-  if (expected.empty()) {
-    return grpc::Status(grpc::StatusCode::PERMISSION_DENIED, absl::StrCat("the ", role, " role is disabled on this server"));
+FlowDecision ServerShared::Flow() {
+  FlowOptions flow = options.flow;
+  flow.max_fps = options.max_fps_hint;
+  flow.jpeg_quality = options.jpeg_quality_hint;
+  FlowInputs in;
+  in.active_streams = static_cast<int>(metrics.sensors_connected.load());
+  in.ingest_fps = ingest.EventsPerSecond();
+  in.ingest_mbps = ingest.BytesPerSecond() / 1e6;
+  const double sent = viewer_sent.BytesPerSecond(), skipped = viewer_skipped.BytesPerSecond();
+  in.viewer_drop_ratio = sent + skipped > 0 ? skipped / (sent + skipped) : 0;
+  const FlowDecision d = DecideFlow(flow, in);
+  metrics.saturated = d.saturated ? 1 : 0;
+  return d;
+}
+
+grpc::Status AuthorizeCall(ServerShared& shared, const grpc::ServerContext& context, Action action,
+                           const std::string& camera_id, const std::string& token, Principal* principal) {
+  const auto refuse = [&](grpc::Status status) {
+    ++shared.metrics.auth_failures;
+    AVE_LOG(WARNING) << context.peer() << ": refused to " << ActionName(action)
+                     << (camera_id.empty() ? "" : " as camera '" + camera_id + "'") << ": " << status.error_message();
+    return status;
+  };
+  std::string presented = token;
+  if (presented.empty()) {
+    const auto& md = context.client_metadata();
+    auto it = md.find("authorization");
+    if (it == md.end()) {
+      return refuse(grpc::Status(grpc::StatusCode::UNAUTHENTICATED,
+                                 absl::StrCat("missing 'authorization: Bearer <token>' metadata to ", ActionName(action))));
+    }
+    const std::string value(it->second.data(), it->second.size());
+    constexpr std::string_view kBearer = "Bearer ";
+    if (value.rfind(kBearer, 0) != 0) {
+      return refuse(grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "authorization metadata must be 'Bearer <token>'"));
+    }
+    presented = value.substr(kBearer.size());
   }
-  const auto& md = context.client_metadata();
-  auto it = md.find("authorization");
-  if (it == md.end()) {
-    return grpc::Status(grpc::StatusCode::UNAUTHENTICATED,
-                        absl::StrCat("missing 'authorization: Bearer <token>' metadata for the ", role, " role"));
+  absl::StatusOr<Principal> who = shared.tokens.Authenticate(presented);
+  if (!who.ok()) {
+    const std::string where = camera_id.empty() ? "" : absl::StrCat("camera '", camera_id, "': ");
+    return refuse(grpc::Status(grpc::StatusCode::UNAUTHENTICATED,
+                               absl::StrCat(where, std::string(who.status().message()), " (to ", ActionName(action), ")")));
   }
-  const std::string value(it->second.data(), it->second.size());
-  if (value != "Bearer " + expected) {
-    return grpc::Status(grpc::StatusCode::UNAUTHENTICATED, absl::StrCat("bad ", role, " token"));
+  if (absl::Status s = Authorize(*who, action, camera_id); !s.ok()) return refuse(ToGrpc(s));
+  if (action == Action::kStream && shared.options.sensor_requires_client_cert) {
+    const auto auth = context.auth_context();
+    if (!auth || !auth->IsPeerAuthenticated()) {
+      return refuse(grpc::Status(grpc::StatusCode::UNAUTHENTICATED,
+                                 absl::StrCat("camera '", camera_id,
+                                              "': this server requires sensors to present a TLS client certificate")));
+    }
   }
+  if (principal) *principal = *who;
   return grpc::Status::OK;
 }
 
@@ -46,10 +86,7 @@ grpc::Status SensorServiceImpl::Stream(grpc::ServerContext* context,
     AVE_LOG(WARNING) << "sensor " << peer << ": refused hello: " << s.message();
     return ToGrpc(s);
   }
-  if (options_.sensor_token.empty() || hello.token() != options_.sensor_token) {
-    AVE_LOG(WARNING) << "camera '" << id << "' (" << peer << "): bad sensor token";
-    return grpc::Status(grpc::StatusCode::UNAUTHENTICATED, absl::StrCat("camera '", id, "': bad sensor token"));
-  }
+  if (grpc::Status s = AuthorizeCall(shared_, *context, Action::kStream, id, hello.token()); !s.ok()) return s;
   const std::optional<CameraEntry> camera = state_.FindCamera(id);
   if (!camera) {
     AVE_LOG(WARNING) << "camera '" << id << "' (" << peer << "): unknown camera id";
@@ -62,10 +99,14 @@ grpc::Status SensorServiceImpl::Stream(grpc::ServerContext* context,
   AVE_LOG(INFO) << "camera '" << id << "' connected from " << peer << " (" << hello.software_version() << ", "
                 << hello.intrinsics().width() << "x" << hello.intrinsics().height() << ")";
   state_.StreamOpened(id, FromProto(hello.intrinsics()));
+  ServerMetrics& metrics = shared_.metrics;
+  ++metrics.sensors_connected;
 
   uint64_t last_sequence = 0;
-  uint64_t accepted = 0;
+  uint64_t accepted = 0, metadata = 0;
   grpc::Status result = grpc::Status::OK;
+  FlowDecision flow = shared_.Flow();
+  auto next_flow = std::chrono::steady_clock::now();
   while (stream->Read(&message)) {
     if (!message.has_frame()) {
       result = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, absl::StrCat("camera '", id, "': a second hello"));
@@ -73,27 +114,57 @@ grpc::Status SensorServiceImpl::Stream(grpc::ServerContext* context,
     }
     if (absl::Status s = ValidateFrame(message.frame(), hello.intrinsics(), last_sequence, options_.frame_limits);
         !s.ok()) {
+      ++metrics.frames_rejected;
       AVE_LOG(WARNING) << "camera '" << id << "': refused " << s.message();
       result = ToGrpc(absl::Status(s.code(), absl::StrCat("camera '", id, "': ", s.message())));
       break;
     }
+    const int64_t received_ns = NowNs();
     last_sequence = message.frame().sequence();
+    const int64_t capture_ns = message.frame().capture_time_ns();
+    const bool metadata_only = message.frame().metadata_only();
+    const size_t jpeg_bytes = message.frame().jpeg().size();
+    if (!metadata_only && jpeg_bytes > 0) {
+      metrics.capture_to_ingest_s.Observe((received_ns - capture_ns - message.frame().clock_offset_ns()) * 1e-9);
+    }
     auto frame = std::make_shared<v1::SensorFrame>(std::move(*message.mutable_frame()));
-    if (absl::Status s = state_.AcceptFrame(id, std::move(frame), NowNs()); !s.ok()) {
+    if (absl::Status s = state_.AcceptFrame(id, std::move(frame), received_ns); !s.ok()) {
       AVE_LOG(WARNING) << "camera '" << id << "': " << s.message() << " (removed while streaming)";
       result = ToGrpc(s);
       break;
     }
-    ++accepted;
+    if (metadata_only) {
+      ++metadata;
+      ++metrics.metadata_frames_in;
+    } else {
+      ++accepted;
+      ++metrics.frames_in;
+      metrics.bytes_in += jpeg_bytes;
+      shared_.ingest.Add(jpeg_bytes);
+    }
+    const auto now = std::chrono::steady_clock::now();
+    if (now >= next_flow) {  // the hint changes slowly: recompute a few times a second
+      flow = shared_.Flow();
+      next_flow = now + std::chrono::milliseconds(250);
+    }
     v1::SensorAck ack;
     ack.set_sequence(last_sequence);
     ack.set_server_time_ns(NowNs());
-    ack.mutable_hint()->set_max_fps(options_.max_fps_hint);
-    ack.mutable_hint()->set_jpeg_quality(options_.jpeg_quality_hint);
+    ack.set_capture_time_ns(capture_ns);
+    ack.mutable_hint()->set_max_fps(flow.max_fps);
+    ack.mutable_hint()->set_jpeg_quality(flow.jpeg_quality);
+    ack.mutable_hint()->set_saturated(flow.saturated);
     if (!stream->Write(ack)) break;
+    if (state_.shut_down()) {
+      // Graceful shutdown: everything read so far was accepted and acked; the agent reconnects.
+      result = grpc::Status(grpc::StatusCode::UNAVAILABLE, "server shutting down; reconnect later");
+      break;
+    }
   }
+  --metrics.sensors_connected;
   state_.StreamClosed(id);
   AVE_LOG(INFO) << "camera '" << id << "' disconnected after " << accepted << " frames"
+                << (metadata ? absl::StrCat(" and ", metadata, " replayed metadata records") : "")
                 << (result.ok() ? "" : " (" + result.error_message() + ")");
   return result;
 }

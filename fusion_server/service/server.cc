@@ -15,9 +15,10 @@ namespace ave {
 std::string ServerOptions::Check() const {
   if (listen_address.empty()) return "listen_address is empty";
   if (store_path.empty()) return "store_path is empty";
-  if (sensor_token.empty() && viewer_token.empty() && admin_token.empty()) {
-    return "no role token set (sensor_token, viewer_token, admin_token): nobody could connect";
+  if (sensor_requires_client_cert && tls.client_ca_file.empty()) {
+    return "sensor_requires_client_cert needs tls.client_ca_file (--tls-client-ca)";
   }
+  if (!(flow.max_ingest_fps >= 0) || !(flow.max_ingest_mbps >= 0)) return "flow budgets must be >= 0";
   if (frame_limits.max_jpeg_bytes == 0 || frame_limits.max_jpeg_bytes + (1 << 16) > size_t(max_message_bytes)) {
     return "frame_limits.max_jpeg_bytes must be > 0 and leave 64 KiB below max_message_bytes";
   }
@@ -32,6 +33,8 @@ struct FusionServer::Impl {
   ServerOptions options;
   std::unique_ptr<store::Store> store;
   SceneState state;
+  std::unique_ptr<internal::ServerShared> shared;
+  std::unique_ptr<MetricsHttpServer> metrics_http;
   uint64_t model_version = 0;
   std::unique_ptr<internal::SensorServiceImpl> sensor;
   std::unique_ptr<internal::SceneServiceImpl> scene;
@@ -84,14 +87,43 @@ absl::StatusOr<std::unique_ptr<FusionServer>> FusionServer::Start(const ServerOp
     AVE_LOG(WARNING) << "the store holds no static model; viewers will see cameras only";
   }
 
-  impl->sensor = std::make_unique<internal::SensorServiceImpl>(impl->options, impl->state);
-  impl->scene = std::make_unique<internal::SceneServiceImpl>(impl->options, impl->state, std::move(chunks));
-  impl->admin = std::make_unique<internal::AdminServiceImpl>(impl->options, impl->state, *impl->store);
+  impl->shared = std::make_unique<internal::ServerShared>(impl->options, impl->state, *impl->store);
+  // Tokens: bootstrap ones from the options, then the issued ones in the store (hashes only).
+  TokenRegistry& tokens = impl->shared->tokens;
+  const std::pair<const std::string*, Role> bootstrap[] = {
+      {&options.sensor_token, Role::kSensor}, {&options.viewer_token, Role::kViewer}, {&options.admin_token, Role::kAdmin}};
+  for (const auto& [token, role] : bootstrap) {
+    if (!token->empty()) tokens.Add(HashToken(*token), Principal{role, "", "", true});
+  }
+  absl::StatusOr<std::vector<store::TokenRecord>> stored = impl->store->ListTokens();
+  if (!stored.ok()) return stored.status();
+  for (const store::TokenRecord& t : *stored) {
+    absl::StatusOr<Role> role = ParseRole(t.role);
+    if (t.revoked || !role.ok()) continue;
+    tokens.Add(t.hash, Principal{*role, t.camera_id});
+  }
+  if (tokens.size() == 0) {
+    return absl::InvalidArgumentError(
+        "server options: no token (--sensor-token, --viewer-token, --admin-token, or issued tokens in the store): "
+        "nobody could connect");
+  }
+  absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> credentials = net::ServerCredentials(options.tls);
+  if (!credentials.ok()) return credentials.status();
+  if (!options.metrics_listen.empty()) {
+    internal::ServerShared* shared = impl->shared.get();
+    absl::StatusOr<std::unique_ptr<MetricsHttpServer>> http =
+        MetricsHttpServer::Start(options.metrics_listen, [shared] { return shared->metrics.RenderPrometheus(); });
+    if (!http.ok()) return http.status();
+    impl->metrics_http = std::move(*http);
+  }
+
+  impl->sensor = std::make_unique<internal::SensorServiceImpl>(*impl->shared);
+  impl->scene = std::make_unique<internal::SceneServiceImpl>(*impl->shared, std::move(chunks));
+  impl->admin = std::make_unique<internal::AdminServiceImpl>(*impl->shared);
 
   grpc::EnableDefaultHealthCheckService(true);
   grpc::ServerBuilder builder;
-  // Insecure transport for now; TLS and mutual TLS arrive with issue 8.
-  builder.AddListeningPort(options.listen_address, grpc::InsecureServerCredentials(), &impl->port);
+  builder.AddListeningPort(options.listen_address, *credentials, &impl->port);
   builder.SetMaxReceiveMessageSize(options.max_message_bytes);
   builder.SetMaxSendMessageSize(options.max_message_bytes);
   builder.RegisterService(impl->sensor.get());
@@ -101,20 +133,26 @@ absl::StatusOr<std::unique_ptr<FusionServer>> FusionServer::Start(const ServerOp
   if (!impl->server || impl->port == 0) {
     return absl::UnavailableError(absl::StrCat("cannot listen on ", options.listen_address, " (address in use?)"));
   }
-  AVE_LOG(INFO) << "ave-server listening on port " << impl->port << ", store " << options.store_path << ", "
-                << cameras->size() << " cameras registered";
+  AVE_LOG(INFO) << "ave-server listening on port " << impl->port << (options.tls.cert_file.empty() ? " (plaintext)" : " (TLS)")
+                << ", store " << options.store_path << ", " << cameras->size() << " cameras registered, "
+                << stored->size() << " issued tokens"
+                << (impl->metrics_http ? absl::StrCat(", metrics on port ", impl->metrics_http->port()) : "");
   return std::unique_ptr<FusionServer>(new FusionServer(std::move(impl)));
 }
 
 int FusionServer::port() const { return impl_->port; }
+int FusionServer::metrics_port() const { return impl_->metrics_http ? impl_->metrics_http->port() : 0; }
+std::string FusionServer::RenderMetrics() const { return impl_->shared->metrics.RenderPrometheus(); }
 SceneState& FusionServer::state() { return impl_->state; }
 uint64_t FusionServer::static_model_version() const { return impl_->model_version; }
 
 void FusionServer::Shutdown(std::chrono::milliseconds grace) {
   if (impl_->shut_down || !impl_->server) return;
   impl_->shut_down = true;
+  if (auto* health = impl_->server->GetHealthCheckService()) health->Shutdown();  // NOT_SERVING from now on
   impl_->state.Shutdown();
   impl_->server->Shutdown(std::chrono::system_clock::now() + grace);
+  impl_->metrics_http.reset();
   AVE_LOG(INFO) << "ave-server stopped";
 }
 

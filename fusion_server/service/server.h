@@ -8,6 +8,8 @@
 #include <string>
 
 #include "absl/status/statusor.h"
+#include "ave/net/tls.h"
+#include "fusion_server/core/flow.h"
 #include "fusion_server/core/scene_state.h"
 #include "fusion_server/core/validation.h"
 
@@ -16,11 +18,20 @@ namespace ave {
 struct ServerOptions {
   std::string listen_address = "127.0.0.1:50051";  // host:port; port 0 = any free port
   std::string store_path = "ave.db";               // SQLite file (":memory:" for tests)
-  // Bearer tokens per role (MISSION part G). Sensors send theirs in the hello; viewers and
-  // administrators in "authorization: Bearer <token>" metadata. Empty disables that role.
+  // Bootstrap bearer tokens per role (MISSION part G; empty = none). Sensors send theirs in the
+  // hello; viewers and administrators in "authorization: Bearer <token>" metadata. They are kept
+  // hashed like the tokens an administrator issues (stored hashed in the model store); the
+  // bootstrap sensor token is a fleet token that may stream as any registered camera, issued
+  // sensor tokens are bound to one camera.
   std::string sensor_token;
   std::string viewer_token;
   std::string admin_token;
+  // Transport: TLS when tls.cert_file is set; mutual TLS when tls.client_ca_file is set too.
+  net::TlsServerOptions tls;
+  bool sensor_requires_client_cert = false;  // sensors must present a verified client certificate
+  // Prometheus text metrics over HTTP ("host:port", port 0 = any); empty = off.
+  std::string metrics_listen;
+  FlowOptions flow;  // server-wide budgets; max_fps/jpeg_quality come from the two hints below
   FrameLimits frame_limits;
   int max_message_bytes = 16 << 20;  // gRPC hard cap; frame_limits.max_jpeg_bytes is the clear-error limit
   float max_fps_hint = 30;           // flow-control hint sent to sensors (0 = none)
@@ -41,6 +52,8 @@ class FusionServer {
   ~FusionServer();
 
   int port() const;
+  int metrics_port() const;  // 0 when metrics are off
+  std::string RenderMetrics() const;
   SceneState& state();
   uint64_t static_model_version() const;
 

@@ -8,37 +8,61 @@
 #include <grpcpp/grpcpp.h>
 
 #include "ave/v1/ave.grpc.pb.h"
+#include "fusion_server/core/auth.h"
+#include "fusion_server/core/flow.h"
 #include "fusion_server/core/scene_state.h"
+#include "fusion_server/service/metrics.h"
 #include "fusion_server/service/server.h"
 #include "model_store/db/store.h"
 
 namespace ave::internal {
 
 grpc::Status ToGrpc(const absl::Status& status);
-// Checks "authorization: Bearer <token>" metadata against `expected` (empty = role disabled).
-grpc::Status CheckBearer(const grpc::ServerContext& context, const std::string& expected, const char* role);
+
+// What the three services share: options, live state, store, tokens, metrics and load meters.
+struct ServerShared {
+  ServerShared(const ServerOptions& o, SceneState& s, store::Store& st) : options(o), state(s), store(st) {}
+  const ServerOptions& options;
+  SceneState& state;
+  store::Store& store;
+  TokenRegistry tokens;
+  ServerMetrics metrics;
+  RateWindow ingest;          // accepted JPEG frames (bytes = JPEG size)
+  RateWindow viewer_sent;     // bytes field = JPEGs written to viewers
+  RateWindow viewer_skipped;  // bytes field = frames skipped for viewers
+  FlowDecision Flow();        // the hint for sensors now (also sets metrics.saturated)
+};
+
+// Authenticates the call's bearer token ("authorization: Bearer <token>" metadata, or `token`
+// when non-empty: the sensor hello's) and authorizes `action`. Unauthenticated / PermissionDenied
+// with a message naming the call and, for sensors, the camera. Counts refusals in metrics.
+grpc::Status AuthorizeCall(ServerShared& shared, const grpc::ServerContext& context, Action action,
+                           const std::string& camera_id = {}, const std::string& token = {},
+                           Principal* principal = nullptr);
 
 class SensorServiceImpl final : public v1::SensorService::Service {
  public:
-  SensorServiceImpl(const ServerOptions& options, SceneState& state) : options_(options), state_(state) {}
+  explicit SensorServiceImpl(ServerShared& shared) : shared_(shared), options_(shared.options), state_(shared.state) {}
   grpc::Status Stream(grpc::ServerContext* context,
                       grpc::ServerReaderWriter<v1::SensorAck, v1::SensorMessage>* stream) override;
 
  private:
+  ServerShared& shared_;
   const ServerOptions& options_;
   SceneState& state_;
 };
 
 class SceneServiceImpl final : public v1::SceneService::Service {
  public:
-  SceneServiceImpl(const ServerOptions& options, SceneState& state, std::vector<v1::StaticModelChunk> chunks)
-      : options_(options), state_(state), chunks_(std::move(chunks)) {}
+  SceneServiceImpl(ServerShared& shared, std::vector<v1::StaticModelChunk> chunks)
+      : shared_(shared), options_(shared.options), state_(shared.state), chunks_(std::move(chunks)) {}
   grpc::Status Subscribe(grpc::ServerContext* context, const v1::SubscribeRequest* request,
                          grpc::ServerWriter<v1::SceneUpdate>* writer) override;
   grpc::Status GetStaticModel(grpc::ServerContext* context, const v1::StaticModelRequest* request,
                               grpc::ServerWriter<v1::StaticModelChunk>* writer) override;
 
  private:
+  ServerShared& shared_;
   const ServerOptions& options_;
   SceneState& state_;
   const std::vector<v1::StaticModelChunk> chunks_;
@@ -46,8 +70,8 @@ class SceneServiceImpl final : public v1::SceneService::Service {
 
 class AdminServiceImpl final : public v1::AdminService::Service {
  public:
-  AdminServiceImpl(const ServerOptions& options, SceneState& state, store::Store& store)
-      : options_(options), state_(state), store_(store) {}
+  explicit AdminServiceImpl(ServerShared& shared)
+      : shared_(shared), options_(shared.options), state_(shared.state), store_(shared.store) {}
   grpc::Status AddCamera(grpc::ServerContext* context, const v1::AddCameraRequest* request,
                          v1::Camera* response) override;
   grpc::Status UpdateCamera(grpc::ServerContext* context, const v1::UpdateCameraRequest* request,
@@ -56,10 +80,19 @@ class AdminServiceImpl final : public v1::AdminService::Service {
                             v1::RemoveCameraResponse* response) override;
   grpc::Status ListCameras(grpc::ServerContext* context, const v1::ListCamerasRequest* request,
                            v1::ListCamerasResponse* response) override;
+  grpc::Status IssueToken(grpc::ServerContext* context, const v1::IssueTokenRequest* request,
+                          v1::IssueTokenResponse* response) override;
+  grpc::Status RevokeToken(grpc::ServerContext* context, const v1::RevokeTokenRequest* request,
+                           v1::RevokeTokenResponse* response) override;
+  grpc::Status ListTokens(grpc::ServerContext* context, const v1::ListTokensRequest* request,
+                          v1::ListTokensResponse* response) override;
 
  private:
   grpc::Status Upsert(grpc::ServerContext* context, const v1::Camera& camera, bool add, v1::Camera* response);
+  void Audit(const Principal& who, const grpc::ServerContext& context, const std::string& action,
+             const std::string& target, const std::string& before, const std::string& after);
 
+  ServerShared& shared_;
   const ServerOptions& options_;
   SceneState& state_;
   store::Store& store_;

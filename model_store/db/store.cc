@@ -38,6 +38,12 @@ const std::vector<const char*>& Migrations() {
       CREATE TRIGGER audit_no_delete BEFORE DELETE ON audit
         BEGIN SELECT RAISE(ABORT, 'audit rows are append-only'); END;
       )sql",
+      // 1 -> 2: bearer tokens (issue 8). Only SHA-256 hex digests are stored, never the token.
+      R"sql(
+      CREATE TABLE tokens (
+        hash TEXT PRIMARY KEY NOT NULL, role TEXT NOT NULL, camera_id TEXT NOT NULL,
+        label TEXT NOT NULL, created_at_ns INTEGER NOT NULL, revoked INTEGER NOT NULL DEFAULT 0);
+      )sql",
   };
   return kSteps;
 }
@@ -388,6 +394,68 @@ absl::StatusOr<int64_t> Store::AppendAudit(const std::string& actor, const std::
   AVE_RETURN_IF_ERROR(stmt.Bind(NowNs(), actor, action, target, before_json, after_json));
   AVE_RETURN_IF_ERROR(stmt.Run());
   return sqlite3_last_insert_rowid(impl_->db->get());
+}
+
+namespace {
+
+bool IsHexDigest(const std::string& s) {
+  if (s.size() != 64) return false;
+  for (char c : s) {
+    if (!((c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'))) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+absl::Status Store::AddToken(const TokenRecord& token) {
+  if (!IsHexDigest(token.hash)) {
+    return absl::InvalidArgumentError("token: hash must be 64 lowercase hex characters (a SHA-256 digest)");
+  }
+  if (token.role != "sensor" && token.role != "viewer" && token.role != "admin") {
+    return absl::InvalidArgumentError("token: role must be sensor, viewer or admin, not '" + token.role + "'");
+  }
+  if (token.role == "sensor" && token.camera_id.empty()) {
+    return absl::InvalidArgumentError("token: a sensor token must name its camera_id");
+  }
+  if (token.camera_id.size() > 64 || token.label.size() > 128) {
+    return absl::InvalidArgumentError("token: camera_id at most 64 and label at most 128 characters");
+  }
+  std::lock_guard lock(impl_->mu);
+  AVE_ASSIGN_OR_RETURN(stmt, Stmt::Prepare(*impl_->db,
+                                           "INSERT INTO tokens (hash, role, camera_id, label, created_at_ns, revoked) "
+                                           "VALUES (?, ?, ?, ?, ?, 0)"));
+  AVE_RETURN_IF_ERROR(stmt.Bind(token.hash, token.role, token.camera_id, token.label, NowNs()));
+  absl::Status s = stmt.Run();
+  if (absl::IsAlreadyExists(s)) return absl::AlreadyExistsError("token " + token.hash.substr(0, 12) + " already exists");
+  return s;
+}
+
+absl::Status Store::RevokeToken(const std::string& hash_prefix) {
+  if (hash_prefix.size() < 8 || hash_prefix.size() > 64) {
+    return absl::InvalidArgumentError("token id must be 8..64 hex characters of the token's hash");
+  }
+  std::lock_guard lock(impl_->mu);
+  AVE_ASSIGN_OR_RETURN(stmt, Stmt::Prepare(*impl_->db,
+                                           "UPDATE tokens SET revoked = 1 WHERE substr(hash, 1, ?1) = ?2"));
+  AVE_RETURN_IF_ERROR(stmt.Bind(static_cast<int>(hash_prefix.size()), hash_prefix));
+  AVE_RETURN_IF_ERROR(stmt.Run());
+  const int changed = sqlite3_changes(impl_->db->get());
+  if (changed == 0) return absl::NotFoundError("token " + hash_prefix + " not found");
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::vector<TokenRecord>> Store::ListTokens() {
+  std::lock_guard lock(impl_->mu);
+  AVE_ASSIGN_OR_RETURN(stmt, Stmt::Prepare(*impl_->db,
+                                           "SELECT hash, role, camera_id, label, created_at_ns, revoked FROM tokens "
+                                           "ORDER BY created_at_ns, hash"));
+  std::vector<TokenRecord> out;
+  for (;;) {
+    AVE_ASSIGN_OR_RETURN(row, stmt.Step());
+    if (!row) return out;
+    out.push_back(TokenRecord{stmt.Text(0), stmt.Text(1), stmt.Text(2), stmt.Text(3), stmt.Int(4), stmt.Int(5) != 0});
+  }
 }
 
 absl::StatusOr<std::vector<AuditEntry>> Store::ListAudit(int limit) {

@@ -42,6 +42,18 @@ struct AuditEntry {
   std::string actor, action, target, before_json, after_json;
 };
 
+// A bearer token (issue 8). The token itself is never stored: `hash` is its SHA-256 as 64 lowercase
+// hex characters (computed by the caller). role is "sensor", "viewer" or "admin"; a sensor token is
+// bound to `camera_id`.
+struct TokenRecord {
+  std::string hash;
+  std::string role;
+  std::string camera_id;  // required for sensor tokens, empty otherwise
+  std::string label;      // free text, at most 128 characters
+  int64_t created_at_ns = 0;  // set by the store
+  bool revoked = false;
+};
+
 // Empty when the record may be stored; otherwise names the camera and the first bad field, e.g.
 // "camera 'gate-1': intrinsics.fx must be finite and > 0". A rotation with |1 - |q|| <= 1e-3 is
 // accepted (and normalised when stored); further from unit, or non-finite, is rejected.
@@ -78,6 +90,13 @@ class Store {
   absl::StatusOr<int64_t> AppendAudit(const std::string& actor, const std::string& action, const std::string& target,
                                       const std::string& before_json, const std::string& after_json);
   absl::StatusOr<std::vector<AuditEntry>> ListAudit(int limit = 100);  // newest first
+
+  // Tokens: hashes only. AddToken: InvalidArgument naming the field, AlreadyExists for a known hash.
+  absl::Status AddToken(const TokenRecord& token);
+  // Marks every token whose hash starts with `hash_prefix` (8..64 hex characters) revoked; NotFound
+  // when none matches. Revoked rows stay (the audit table names them).
+  absl::Status RevokeToken(const std::string& hash_prefix);
+  absl::StatusOr<std::vector<TokenRecord>> ListTokens();  // oldest first, revoked included
 
  private:
   class Impl;

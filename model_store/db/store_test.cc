@@ -413,5 +413,40 @@ TEST(Store, Concurrency_FourThreadsAddAndListWithoutCorruption) {
   EXPECT_EQ(store->ListAudit(1000)->size(), static_cast<size_t>(kThreads * kPerThread));
 }
 
+TEST(Store, Token_StoresHashesOnlyAndRevokesByPrefix) {
+  TempDir dir;
+  const std::string path = dir.File("tokens.db");
+  const std::string hash_a(64, 'a'), hash_b = std::string(63, 'b') + "c";
+  {
+    auto store = OpenOrDie(path);
+    ASSERT_TRUE(store);
+    ASSERT_TRUE(store->AddToken({hash_a, "sensor", "cam1", "gate sensor"}).ok());
+    ASSERT_TRUE(store->AddToken({hash_b, "viewer", "", ""}).ok());
+    EXPECT_TRUE(absl::IsAlreadyExists(store->AddToken({hash_a, "viewer", "", ""})));
+    EXPECT_THAT(std::string(store->AddToken({"secret-token", "viewer", "", ""}).message()), HasSubstr("hash"));
+    EXPECT_THAT(std::string(store->AddToken({std::string(64, 'd'), "root", "", ""}).message()), HasSubstr("role"));
+    EXPECT_THAT(std::string(store->AddToken({std::string(64, 'e'), "sensor", "", ""}).message()),
+                HasSubstr("camera_id"));
+    EXPECT_TRUE(absl::IsNotFound(store->RevokeToken("0123456789")));
+    ASSERT_TRUE(store->RevokeToken(hash_b.substr(0, 12)).ok());
+  }
+  auto store = OpenOrDie(path);  // reopened: the tokens table came through a migration and persisted
+  ASSERT_TRUE(store);
+  auto tokens = store->ListTokens();
+  ASSERT_TRUE(tokens.ok()) << tokens.status();
+  ASSERT_EQ(tokens->size(), 2u);
+  for (const TokenRecord& t : *tokens) {
+    if (t.hash == hash_a) {
+      EXPECT_EQ(t.role, "sensor");
+      EXPECT_EQ(t.camera_id, "cam1");
+      EXPECT_FALSE(t.revoked);
+    } else {
+      EXPECT_EQ(t.hash, hash_b);
+      EXPECT_TRUE(t.revoked);
+    }
+    EXPECT_GT(t.created_at_ns, 0);
+  }
+}
+
 }  // namespace
 }  // namespace ave::store

@@ -1,6 +1,7 @@
 #include "sensor_agent/stream/agent_streamer.h"
 
 #include <algorithm>
+#include <filesystem>
 #include <random>
 #include <thread>
 
@@ -12,6 +13,7 @@
 #include "ave/v1/ave.grpc.pb.h"
 #include "fusion_server/core/convert.h"
 #include "model_store/common/log.h"
+#include "sensor_agent/stream/metadata_buffer.h"
 
 namespace ave {
 namespace {
@@ -32,6 +34,21 @@ bool IsFatal(grpc::StatusCode code) {
 
 }  // namespace
 
+void ClockOffsetEstimator::Sent(uint64_t sequence, int64_t local_ns) { sent_[sequence % kRing] = {sequence, local_ns}; }
+
+bool ClockOffsetEstimator::Acked(uint64_t sequence, int64_t server_ns, int64_t local_ns) {
+  const auto& [seq, sent_ns] = sent_[sequence % kRing];
+  if (seq != sequence || local_ns < sent_ns) return false;
+  const int64_t rtt = local_ns - sent_ns;
+  samples_.emplace_back(rtt, server_ns - (sent_ns + rtt / 2));
+  if (samples_.size() > window_) samples_.erase(samples_.begin());
+  const auto best = std::min_element(samples_.begin(), samples_.end());
+  rtt_ns_ = best->first;
+  offset_ns_ = best->second;
+  known_ = true;
+  return true;
+}
+
 std::string AgentOptions::Check() const {
   if (server.empty()) return "server is empty";
   if (camera_id.empty()) return "camera_id is empty";
@@ -40,6 +57,7 @@ std::string AgentOptions::Check() const {
   if (max_frames < 0) return "max_frames must be >= 0";
   if (!(duration_s >= 0)) return "duration_s must be >= 0";
   if (backoff_initial.count() <= 0 || backoff_max < backoff_initial) return "backoff must be 0 < initial <= max";
+  if (metadata_in_memory == 0) return "metadata_in_memory must be > 0";
   return {};
 }
 
@@ -54,16 +72,53 @@ AgentStats AgentStreamer::stats() const {
 absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
   if (const std::string why = options_.Check(); !why.empty()) return absl::InvalidArgumentError("agent: " + why);
   const std::string& id = options_.camera_id;
+  const std::function<int64_t()> clock = options_.clock ? options_.clock : [] { return NowNs(); };
   std::mt19937_64 rng(std::hash<std::string>{}(id) ^ static_cast<uint64_t>(Clock::now().time_since_epoch().count()));
   const auto started = Clock::now();
   auto backoff = options_.backoff_initial;
   uint64_t sequence = 0;
   int64_t sent_total = 0;
   bool source_done = false;
+  std::string spill = options_.spill_path;
+  if (spill.empty()) {
+    spill = (std::filesystem::temp_directory_path() / absl::StrCat("ave-agent-", id, "-", ::getpid(), ".meta")).string();
+  } else if (spill == "-") {
+    spill.clear();
+  }
+  MetadataBuffer buffer({.max_in_memory = options_.metadata_in_memory,
+                         .spill_path = spill,
+                         .max_spilled = options_.metadata_max_spilled});
+  std::mutex clock_mu;
+  ClockOffsetEstimator estimator;
+  std::atomic<float> hint_fps{0};
+  std::atomic<int> hint_quality{0};
+  auto limited = [&](Clock::time_point now) {
+    return (options_.max_frames > 0 && sent_total >= options_.max_frames) ||
+           (options_.duration_s > 0 && now - started >= std::chrono::duration<double>(options_.duration_s));
+  };
+  auto pace = [&] { return hint_fps.load() > 0 ? std::min<double>(options_.fps, hint_fps.load()) : options_.fps; };
+  // One frame's metadata as a SensorFrame (no JPEG yet), with the next sequence number.
+  auto metadata_of = [&](const CapturedFrame& frame) {
+    v1::SensorFrame out;
+    out.set_capture_time_ns(frame.capture_time_ns);
+    out.set_sequence(++sequence);
+    if (frame.world_from_camera) {
+      *out.mutable_pose() = ToProto(*frame.world_from_camera);
+    } else if (options_.mounting_pose) {
+      *out.mutable_pose() = ToProto(*options_.mounting_pose);
+    }
+    return out;
+  };
+  auto note_buffered = [&] {
+    std::lock_guard lock(stats_mu_);
+    ++stats_.metadata_buffered;
+    stats_.metadata_dropped = static_cast<int64_t>(buffer.dropped());
+  };
 
   while (!stop.load() && !source_done) {
-    auto channel = grpc::CreateChannel(options_.server, grpc::InsecureChannelCredentials());
-    auto stub = v1::SensorService::NewStub(channel);
+    absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = net::MakeChannel(options_.server, options_.tls);
+    if (!channel.ok()) return absl::InvalidArgumentError(absl::StrCat("camera '", id, "': ", channel.status().message()));
+    auto stub = v1::SensorService::NewStub(*channel);
     grpc::ClientContext context;
     auto stream = stub->Stream(&context);
     {
@@ -78,28 +133,55 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
     hello.mutable_hello()->set_software_version(options_.software_version);
     bool healthy = stream->Write(hello);
 
-    // Acks and flow-control hints arrive on their own thread.
-    std::atomic<float> hint_fps{0};
-    std::atomic<int> hint_quality{0};
+    // Acks, flow-control hints and clock samples arrive on their own thread.
     std::atomic<bool> acked_once{false};
     std::thread reader([&] {
       v1::SensorAck ack;
       while (stream->Read(&ack)) {
+        const int64_t now = clock();
         hint_fps = ack.hint().max_fps();
         hint_quality = static_cast<int>(ack.hint().jpeg_quality());
         acked_once = true;
+        std::lock_guard clock_lock(clock_mu);
+        estimator.Acked(ack.sequence(), ack.server_time_ns(), now);
         std::lock_guard lock(stats_mu_);
         ++stats_.frames_acked;
+        stats_.clock_offset_ns = estimator.offset_ns();
+        stats_.clock_rtt_ns = estimator.rtt_ns();
+        stats_.hint_fps = hint_fps;
       }
     });
+    auto send = [&](v1::SensorMessage& message) {
+      {
+        std::lock_guard clock_lock(clock_mu);
+        message.mutable_frame()->set_clock_offset_ns(estimator.known() ? estimator.offset_ns() : 0);
+        estimator.Sent(message.frame().sequence(), clock());
+      }
+      return stream->Write(message);
+    };
+
+    // Replay what was buffered during the outage, oldest first, before any live frame.
+    while (healthy && !stop.load()) {
+      absl::StatusOr<std::optional<v1::SensorFrame>> record = buffer.Pop();
+      if (!record.ok()) {
+        AVE_LOG(ERROR) << "camera '" << id << "': " << record.status().message();
+        continue;
+      }
+      if (!record->has_value()) break;
+      v1::SensorMessage message;
+      *message.mutable_frame() = **record;
+      if (!send(message)) {
+        buffer.Unpop(std::move(**record));
+        healthy = false;
+        break;
+      }
+      std::lock_guard lock(stats_mu_);
+      ++stats_.metadata_replayed;
+    }
 
     auto next_tick = Clock::now();
     while (healthy && !stop.load()) {
-      if (options_.max_frames > 0 && sent_total >= options_.max_frames) {
-        source_done = true;
-        break;
-      }
-      if (options_.duration_s > 0 && Clock::now() - started >= std::chrono::duration<double>(options_.duration_s)) {
+      if (limited(Clock::now())) {
         source_done = true;
         break;
       }
@@ -126,16 +208,11 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
         continue;
       }
       v1::SensorMessage message;
-      v1::SensorFrame* out = message.mutable_frame();
-      out->set_capture_time_ns(frame->capture_time_ns);
-      out->set_sequence(++sequence);
-      if (frame->world_from_camera) {
-        *out->mutable_pose() = ToProto(*frame->world_from_camera);
-      } else if (options_.mounting_pose) {
-        *out->mutable_pose() = ToProto(*options_.mounting_pose);
-      }
-      out->set_jpeg(jpeg.data(), jpeg.size());
-      if (!stream->Write(message)) {
+      *message.mutable_frame() = metadata_of(*frame);
+      message.mutable_frame()->set_jpeg(jpeg.data(), jpeg.size());
+      if (!send(message)) {
+        buffer.Push(std::move(*message.mutable_frame()));  // the link broke: keep its metadata
+        note_buffered();
         healthy = false;
         break;
       }
@@ -148,8 +225,7 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
       if (acked_once) backoff = options_.backoff_initial;  // the link works again
       // Pace non-live sources: the slower of our rate and the server's hint.
       if (!source_->live()) {
-        const double fps = hint_fps.load() > 0 ? std::min<double>(options_.fps, hint_fps.load()) : options_.fps;
-        next_tick += std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / fps));
+        next_tick += std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / pace()));
         if (next_tick < Clock::now()) next_tick = Clock::now();
         SleepUnlessStopped(next_tick - Clock::now(), stop);
       }
@@ -170,18 +246,32 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
         return absl::Status(static_cast<absl::StatusCode>(status.error_code()), status.error_message());
       }
       if (source_done) break;
-      // Jittered exponential backoff: a random wait in [backoff/2, backoff], then double it.
+      // Jittered exponential backoff: a random wait in [backoff/2, backoff], then double it. The
+      // camera keeps capturing meanwhile; each frame's metadata goes to the buffer.
       std::uniform_int_distribution<int64_t> jitter(backoff.count() / 2, backoff.count());
       const auto wait = std::chrono::milliseconds(jitter(rng));
       AVE_LOG(WARNING) << "camera '" << id << "': stream ended (" << status.error_message() << "); reconnecting in "
-                       << wait.count() << " ms";
-      SleepUnlessStopped(wait, stop);
+                       << wait.count() << " ms (" << buffer.size() << " metadata records buffered)";
+      const auto until = Clock::now() + wait;
+      while (!stop.load() && Clock::now() < until && !limited(Clock::now())) {
+        absl::StatusOr<CapturedFrame> frame = source_->Next();
+        if (frame.ok()) {
+          buffer.Push(metadata_of(*frame));
+          note_buffered();
+        } else if (frame.status().code() == absl::StatusCode::kOutOfRange) {
+          source_done = true;
+          break;
+        }
+        const auto tick = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / pace()));
+        SleepUnlessStopped(std::min<Clock::duration>(tick, until - Clock::now()), stop);
+      }
       backoff = std::min(options_.backoff_max, backoff * 2);
     }
   }
   const AgentStats s = stats();
   AVE_LOG(INFO) << "camera '" << id << "': stopped after " << s.frames_sent << " frames sent, " << s.frames_acked
-                << " acked, " << s.connects << " connections";
+                << " acked, " << s.connects << " connections, " << s.metadata_replayed << "/" << s.metadata_buffered
+                << " buffered metadata records replayed";
   return absl::OkStatus();
 }
 

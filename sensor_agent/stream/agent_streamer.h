@@ -1,17 +1,23 @@
 #pragma once
 // The agent's uplink: takes frames from a FrameSource, JPEG-encodes them, and streams them with
 // their pose to the fusion server. Survives server restarts: on a broken stream it reconnects with
-// jittered exponential backoff and carries on with the newest frame (latest-frame semantics; the
-// bounded metadata buffer across outages arrives with issue 8).
+// jittered exponential backoff and carries on with the newest frame (latest-frame semantics).
+// During an outage it keeps capturing and buffers each frame's pose and boxes (bounded, spilled to
+// disk when long) and replays them, oldest first, as metadata-only frames once it is back (issue 8).
+// It estimates the offset between its clock and the server's from ack round trips and sends it
+// with every frame, so the server places captures on its own clock.
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <optional>
 #include <string>
 
 #include "absl/status/status.h"
+#include "ave/net/tls.h"
 #include "model_store/geometry/rigid3.h"
 #include "sensor_agent/source/frame_source.h"
 
@@ -27,7 +33,16 @@ struct AgentOptions {
   int64_t max_frames = 0;     // stop after this many frames sent (0 = no limit)
   double duration_s = 0;      // stop after this long (0 = no limit)
   std::chrono::milliseconds backoff_initial{200};
-  std::chrono::milliseconds backoff_max{5000};
+  // Kept at 2 s so that an agent is back within ~2.5 s of the server's return (issue 8: 5 s).
+  std::chrono::milliseconds backoff_max{2000};
+  net::TlsClientOptions tls;  // TLS (and mutual TLS) to the server; empty ca_file = plaintext
+  // Metadata kept across outages: records in memory, then spilled to `spill_path` (empty: a file
+  // in the temp directory named after the camera; "-" = no spill).
+  size_t metadata_in_memory = 4096;
+  std::string spill_path;
+  size_t metadata_max_spilled = 1'000'000;
+  // The sensor's clock (ns); capture stamps from the source are taken to be on it.
+  std::function<int64_t()> clock;
   std::optional<Rigid3d> mounting_pose;  // used when the source knows no pose of its own
 
   std::string Check() const;  // empty when usable, else names the field
@@ -39,7 +54,36 @@ struct AgentStats {
   int64_t frames_acked = 0;
   int64_t connects = 0;
   int64_t bytes_sent = 0;
+  int64_t metadata_buffered = 0;  // records buffered during outages
+  int64_t metadata_replayed = 0;  // records replayed after reconnecting
+  int64_t metadata_dropped = 0;   // records lost to the buffer bound
+  int64_t clock_offset_ns = 0;    // current estimate of server clock - sensor clock
+  int64_t clock_rtt_ns = 0;       // round trip of the sample it came from
+  float hint_fps = 0;             // last flow hint
   std::string last_error;
+};
+
+// Server-minus-sensor clock offset from ack round trips: for a frame sent at local t0, acked with
+// server time ts and received at t1, offset = ts - (t0 + t1) / 2 with error at most (t1 - t0) / 2.
+// Keeps the sample with the smallest round trip among the last `window` (an NTP-like filter).
+class ClockOffsetEstimator {
+ public:
+  explicit ClockOffsetEstimator(size_t window = 64) : window_(window) {}
+  void Sent(uint64_t sequence, int64_t local_ns);
+  // Returns false when the sequence's send time is unknown (too old).
+  bool Acked(uint64_t sequence, int64_t server_ns, int64_t local_ns);
+  bool known() const { return known_; }
+  int64_t offset_ns() const { return offset_ns_; }
+  int64_t rtt_ns() const { return rtt_ns_; }
+
+ private:
+  static constexpr size_t kRing = 1024;
+  std::array<std::pair<uint64_t, int64_t>, kRing> sent_{};
+  size_t window_;
+  std::vector<std::pair<int64_t, int64_t>> samples_;  // (rtt, offset), newest last
+  bool known_ = false;
+  int64_t offset_ns_ = 0;
+  int64_t rtt_ns_ = 0;
 };
 
 class AgentStreamer {

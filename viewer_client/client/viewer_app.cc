@@ -9,6 +9,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "ave/net/tls.h"
 #include "absl/strings/str_cat.h"
 #include "model_store/common/log.h"
 #include "model_store/geometry/camera.h"
@@ -150,7 +151,11 @@ absl::Status RunViewer(const ViewerOptions& options) {
   auto renderer = Renderer::Create();
   if (!renderer.ok()) return renderer.status();
 
-  auto channel = grpc::CreateChannel(options.server, grpc::InsecureChannelCredentials());
+  absl::StatusOr<std::shared_ptr<grpc::Channel>> made = net::MakeChannel(
+      options.server, {.ca_file = options.tls_ca, .cert_file = options.tls_cert, .key_file = options.tls_key,
+                       .server_name = options.tls_server_name});
+  if (!made.ok()) return absl::InvalidArgumentError("viewer: " + std::string(made.status().message()));
+  std::shared_ptr<grpc::Channel> channel = *made;
   SceneClient client(channel, options.token, options.viewer_id);
   uint64_t model_version = 0;
   absl::StatusOr<TriangleMesh> mesh = client.FetchStaticModel(&model_version);

@@ -31,6 +31,9 @@ struct ViewerOptions {
   double browse_fov_deg = 55;
   bool draw_frustums = true;
   int max_frames = 0;  // window: close after this many frames (0 = until the user closes it)
+  // TLS to the server (issue 8): PEM CA of the server certificate (empty = plaintext), and an
+  // optional client certificate and key for mutual TLS.
+  std::string tls_ca, tls_cert, tls_key, tls_server_name;
 
   std::string Check() const;
 };

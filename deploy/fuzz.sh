@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# Builds the libFuzzer targets with clang (ASan + LSan + UBSan) into ${AVE_FUZZ_BUILD:-build-fuzz}
+# and runs each for ${AVE_FUZZ_SECONDS:-20} s on a copy of its seed corpus. Exits non-zero on the
+# first finding (the reproducer is left in the build folder). Needs clang-14 and libclang-rt-14-dev.
+#   deploy/fuzz.sh                  (AVE_FUZZ_SECONDS=600 for the long local runs)
+set -euo pipefail
+root=$(cd "$(dirname "$0")/.." && pwd)
+build=${AVE_FUZZ_BUILD:-$root/build-fuzz}
+seconds=${AVE_FUZZ_SECONDS:-20}
+CC=clang-14 CXX=clang++-14 cmake -S "$root" -B "$build" -G Ninja -DAVE_FUZZ=ON -DAVE_BUILD_TESTS=OFF \
+  -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+targets=(jpeg_header sensor_message mesh_blob)
+cmake --build "$build" --target "${targets[@]/#/ave_fuzz_}"
+for t in "${targets[@]}"; do
+  work=$build/fuzz/corpus-$t
+  mkdir -p "$work"
+  echo "fuzz: $t for $seconds s"
+  (cd "$build/fuzz" && nice -n 19 "./ave_fuzz_$t" -max_total_time="$seconds" -rss_limit_mb=2048 -print_final_stats=1 \
+    "$work" "$root/fusion_server/fuzz/corpus/$t" 2>&1 | grep -E "^(stat::number_of_executed_units|Done|==[0-9]+==ERROR|SUMMARY)" )
+done
+echo "fuzz: no findings"

@@ -1,0 +1,127 @@
+#include "fusion_server/core/auth.h"
+
+#include <openssl/evp.h>
+#include <openssl/rand.h>
+
+#include "absl/strings/str_cat.h"
+
+namespace ave {
+namespace {
+
+constexpr size_t kMaxTokenBytes = 4096;
+
+std::string Hex(const unsigned char* bytes, size_t n) {
+  static constexpr char kDigits[] = "0123456789abcdef";
+  std::string out(2 * n, '0');
+  for (size_t i = 0; i < n; ++i) {
+    out[2 * i] = kDigits[bytes[i] >> 4];
+    out[2 * i + 1] = kDigits[bytes[i] & 15];
+  }
+  return out;
+}
+
+}  // namespace
+
+const char* RoleName(Role role) {
+  switch (role) {
+    case Role::kSensor: return "sensor";
+    case Role::kViewer: return "viewer";
+    case Role::kAdmin: return "admin";
+  }
+  return "unknown";
+}
+
+absl::StatusOr<Role> ParseRole(const std::string& name) {
+  if (name == "sensor") return Role::kSensor;
+  if (name == "viewer") return Role::kViewer;
+  if (name == "admin") return Role::kAdmin;
+  return absl::InvalidArgumentError(absl::StrCat("role must be sensor, viewer or admin, not '", name, "'"));
+}
+
+const char* ActionName(Action action) {
+  switch (action) {
+    case Action::kStream: return "stream frames";
+    case Action::kSubscribe: return "subscribe to scene state";
+    case Action::kReadModel: return "read the static model";
+    case Action::kManageCameras: return "manage cameras";
+    case Action::kManageTokens: return "manage tokens";
+  }
+  return "unknown action";
+}
+
+std::string HashToken(std::string_view token) {
+  unsigned char digest[EVP_MAX_MD_SIZE];
+  unsigned int length = 0;
+  // One-shot EVP digest; SHA-256 cannot fail for in-memory input short of an allocation failure.
+  if (EVP_Digest(token.data(), token.size(), digest, &length, EVP_sha256(), nullptr) != 1) return std::string(64, '0');
+  return Hex(digest, length);
+}
+
+absl::StatusOr<std::string> NewRandomToken() {
+  unsigned char bytes[32];
+  if (RAND_bytes(bytes, sizeof bytes) != 1) return absl::InternalError("token: the OpenSSL random generator failed");
+  return Hex(bytes, sizeof bytes);
+}
+
+void TokenRegistry::Add(const std::string& hash, Principal principal) {
+  principal.token_id = hash.substr(0, 12);
+  std::lock_guard lock(mu_);
+  by_hash_[hash] = std::move(principal);
+}
+
+int TokenRegistry::Revoke(const std::string& hash_prefix) {
+  std::lock_guard lock(mu_);
+  int removed = 0;
+  for (auto it = by_hash_.begin(); it != by_hash_.end();) {
+    if (!hash_prefix.empty() && it->first.compare(0, hash_prefix.size(), hash_prefix) == 0) {
+      it = by_hash_.erase(it);
+      ++removed;
+    } else {
+      ++it;
+    }
+  }
+  return removed;
+}
+
+size_t TokenRegistry::size() const {
+  std::lock_guard lock(mu_);
+  return by_hash_.size();
+}
+
+absl::StatusOr<Principal> TokenRegistry::Authenticate(std::string_view token) const {
+  if (token.empty()) return absl::UnauthenticatedError("no bearer token presented");
+  if (token.size() > kMaxTokenBytes) {
+    return absl::UnauthenticatedError(absl::StrCat("bearer token longer than ", kMaxTokenBytes, " bytes"));
+  }
+  const std::string hash = HashToken(token);
+  std::lock_guard lock(mu_);
+  auto it = by_hash_.find(hash);
+  if (it == by_hash_.end()) return absl::UnauthenticatedError("unknown or revoked bearer token");
+  return it->second;
+}
+
+absl::Status Authorize(const Principal& who, Action action, const std::string& camera_id) {
+  const auto deny = [&](const std::string& why) {
+    return absl::PermissionDeniedError(absl::StrCat("token ", who.token_id, " (role ", RoleName(who.role),
+                                                    ") may not ", ActionName(action), why));
+  };
+  switch (action) {
+    case Action::kStream:
+      if (who.role != Role::kSensor) return deny(": only sensor tokens stream");
+      if (!who.camera_id.empty() && who.camera_id != camera_id) {
+        return deny(absl::StrCat(" as camera '", camera_id, "': it is bound to camera '", who.camera_id, "'"));
+      }
+      return absl::OkStatus();
+    case Action::kSubscribe:
+    case Action::kReadModel:
+      if (who.role == Role::kViewer || who.role == Role::kAdmin) return absl::OkStatus();
+      return deny(": only viewer and admin tokens read scene state");
+    case Action::kManageCameras:
+    case Action::kManageTokens:
+      if (who.role == Role::kAdmin) return absl::OkStatus();
+      return deny(": only admin tokens do");
+  }
+  return deny("");
+}
+
+}  // namespace ave

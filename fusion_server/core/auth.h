@@ -1,0 +1,65 @@
+#pragma once
+// Bearer tokens and roles (MISSION part G, issue 8). Pure: no gRPC, no SQLite.
+//
+// Roles:
+//   sensor — may only open SensorService.Stream, and only as the camera its token is bound to
+//            (a bootstrap fleet token from --sensor-token may stream as any registered camera);
+//   viewer — may only read scene state (Subscribe, GetStaticModel);
+//   admin  — may manage cameras and tokens, and may also read scene state.
+// Tokens are kept as SHA-256 digests only, in memory and in the store; a presented token is
+// hashed and looked up. Unknown or revoked token: Unauthenticated. Known token outside its role's
+// rights: PermissionDenied naming the role and the call.
+#include <map>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+
+namespace ave {
+
+enum class Role { kSensor, kViewer, kAdmin };
+
+const char* RoleName(Role role);
+absl::StatusOr<Role> ParseRole(const std::string& name);
+
+// What a call may do. Stream names the camera it streams as.
+enum class Action { kStream, kSubscribe, kReadModel, kManageCameras, kManageTokens };
+const char* ActionName(Action action);
+
+struct Principal {
+  Role role = Role::kViewer;
+  std::string camera_id;  // sensor tokens bound to one camera; empty = any (bootstrap fleet token)
+  std::string token_id;   // first 12 hex characters of the hash: names the token in logs and audit
+  bool bootstrap = false;  // from the command line / environment rather than the store
+};
+
+// SHA-256 of `token` as 64 lowercase hex characters (OpenSSL libcrypto).
+std::string HashToken(std::string_view token);
+
+// A fresh random token: 32 bytes from the OpenSSL CSPRNG as 64 hex characters.
+absl::StatusOr<std::string> NewRandomToken();
+
+class TokenRegistry {
+ public:
+  // Adds a token by its hash; replaces an earlier entry with the same hash.
+  void Add(const std::string& hash, Principal principal);
+  // Forgets every token whose hash starts with `hash_prefix`; returns how many.
+  int Revoke(const std::string& hash_prefix);
+  size_t size() const;
+
+  // Unauthenticated for an empty, oversize, unknown or revoked token.
+  absl::StatusOr<Principal> Authenticate(std::string_view token) const;
+
+ private:
+  mutable std::mutex mu_;
+  std::map<std::string, Principal> by_hash_;
+};
+
+// Ok, or PermissionDenied naming the role, the action and (for sensors) both cameras.
+absl::Status Authorize(const Principal& who, Action action, const std::string& camera_id = {});
+
+}  // namespace ave
