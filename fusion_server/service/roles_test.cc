@@ -21,6 +21,7 @@
 #include "fusion_server/core/auth.h"
 #include "fusion_server/core/convert.h"
 #include "fusion_server/service/server.h"
+#include "fusion_server/service/test_fixtures.h"
 #include "grpc/health/v1/health.grpc.pb.h"
 #include "model_store/common/log.h"
 #include "model_store/db/store.h"
@@ -29,26 +30,12 @@ namespace ave {
 namespace {
 
 using ::testing::HasSubstr;
+using fixtures::CameraRecord;
+using fixtures::Jpeg;
 using ::testing::Not;
 
 constexpr char kAdmin[] = "bootstrap-admin";
 constexpr char kViewer[] = "bootstrap-viewer";
-
-std::string Jpeg(int w, int h) {
-  std::vector<uchar> bytes;
-  cv::imencode(".jpg", cv::Mat(h, w, CV_8UC3, cv::Scalar(10, 200, 30)), bytes);
-  return std::string(bytes.begin(), bytes.end());
-}
-
-v1::Camera CameraRecord(const std::string& id) {
-  v1::Camera c;
-  c.set_id(id);
-  c.set_name("Test " + id);
-  *c.mutable_intrinsics() = ToProto(PinholeIntrinsics::FromFov(64, 48, 60));
-  *c.mutable_mounting_pose() = ToProto(LookAt({0, 0, 10}, {10, 0, 0}));
-  c.set_enabled(true);
-  return c;
-}
 
 // A fresh CA and certificates from deploy/make-certs.sh, once per test binary.
 const std::filesystem::path& Certs() {

@@ -1,6 +1,7 @@
 // The server's contract with misbehaving sensors, viewers and administrators: every bad input gets
 // a clear status naming the camera or field, and everyone else keeps being served.
 #include "fusion_server/service/server.h"
+#include "fusion_server/service/test_fixtures.h"
 
 #include <filesystem>
 #include <thread>
@@ -19,26 +20,12 @@ namespace ave {
 namespace {
 
 using ::testing::HasSubstr;
+using fixtures::CameraRecord;
+using fixtures::Jpeg;
 
 constexpr char kSensor[] = "sensor-secret";
 constexpr char kViewer[] = "viewer-secret";
 constexpr char kAdmin[] = "admin-secret";
-
-std::string Jpeg(int w, int h) {
-  std::vector<uchar> bytes;
-  cv::imencode(".jpg", cv::Mat(h, w, CV_8UC3, cv::Scalar(10, 200, 30)), bytes);
-  return std::string(bytes.begin(), bytes.end());
-}
-
-v1::Camera CameraRecord(const std::string& id) {
-  v1::Camera c;
-  c.set_id(id);
-  c.set_name("Test " + id);
-  *c.mutable_intrinsics() = ToProto(PinholeIntrinsics::FromFov(64, 48, 60));
-  *c.mutable_mounting_pose() = ToProto(LookAt({0, 0, 10}, {10, 0, 0}));
-  c.set_enabled(true);
-  return c;
-}
 
 class ServerTest : public ::testing::Test {
  protected:

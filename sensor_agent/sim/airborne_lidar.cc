@@ -211,11 +211,9 @@ absl::Status SimulateAirborneLidar(const scene::SyntheticCampus& campus, const A
 }
 
 absl::StatusOr<LasFile> ReadLas6(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return absl::NotFoundError("cannot open " + path);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  const std::string b = ss.str();
+  absl::StatusOr<std::string> read = internal::ReadWholeFile(path);
+  if (!read.ok()) return read.status();
+  const std::string& b = *read;
   if (b.size() < kHeaderBytes || b.compare(0, 4, "LASF") != 0) return absl::InvalidArgumentError(path + ": not a LAS file");
   const char* p = b.data();
   LasFile las;

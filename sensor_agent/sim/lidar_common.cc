@@ -1,5 +1,8 @@
 #include "sensor_agent/sim/lidar_common.h"
 
+#include <fstream>
+#include <sstream>
+
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -9,6 +12,15 @@
 #include "sensor_agent/sim/sim_camera.h"
 
 namespace ave::sim::internal {
+
+absl::StatusOr<std::string> ReadWholeFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::NotFoundError("cannot open " + path);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
 
 uint64_t MixSeed(uint64_t seed, uint64_t stream, uint64_t index) {
   uint64_t z = seed + 0x9E3779B97F4A7C15ull * (stream + 1) + 0xBF58476D1CE4E5B9ull * (index + 1);

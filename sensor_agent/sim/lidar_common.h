@@ -14,7 +14,13 @@
 #include "model_store/geometry/mesh.h"
 #include "model_store/scene/campus.h"
 
+#include "absl/status/statusor.h"
+
 namespace ave::sim::internal {
+
+// The whole file as bytes; NotFound naming the path when it cannot be opened.
+absl::StatusOr<std::string> ReadWholeFile(const std::string& path);
+
 
 // SplitMix64 finaliser: decorrelates (seed, stream, index) into an RNG seed.
 uint64_t MixSeed(uint64_t seed, uint64_t stream, uint64_t index);

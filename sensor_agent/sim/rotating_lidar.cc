@@ -340,11 +340,9 @@ absl::Status WriteRotatingLidar(const scene::SyntheticCampus& campus, const Rota
 }
 
 absl::StatusOr<LidarFrame> ReadRotatingLidarFrame(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return absl::NotFoundError("cannot open " + path);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  const std::string bytes = ss.str();
+  absl::StatusOr<std::string> read = internal::ReadWholeFile(path);
+  if (!read.ok()) return read.status();
+  const std::string& bytes = *read;
   if (bytes.size() < kFrameHeaderBytes || bytes.compare(0, 8, std::string(kFrameMagic, 8)) != 0) {
     return absl::InvalidArgumentError(path + ": not an AVELIDR1 frame");
   }
