@@ -5,8 +5,8 @@ set -u
 bin=$1
 fail=0
 # Each executable with its required arguments, so the bad flag is the only fault.
-declare -A args=([ave-server]="" [ave-agent]="--camera c --source sim:campus#cam1" [ave-viewer]="" [ave-admin]="list" [ave-sim]="camera --scenario minimal --camera c --out /tmp/ave_cli_sim" [ave-bench]="sim")
-for exe in ave-server ave-agent ave-viewer ave-admin ave-sim ave-bench; do
+declare -A args=([ave-server]="" [ave-agent]="--camera c --source sim:campus#cam1" [ave-viewer]="" [ave-admin]="list" [ave-sim]="camera --scenario minimal --camera c --out /tmp/ave_cli_sim" [ave-bench]="sim" [ave-loadgen]="")
+for exe in ave-server ave-agent ave-viewer ave-admin ave-sim ave-bench ave-loadgen; do
   if ! "$bin/$exe" --help >/tmp/ave_cli_help.$$ 2>&1; then echo "FAIL $exe --help exited non-zero"; fail=1; fi
   grep -q -- "--" /tmp/ave_cli_help.$$ || { echo "FAIL $exe --help printed no options"; fail=1; }
   # shellcheck disable=SC2086
