@@ -54,6 +54,7 @@ std::string AgentOptions::Check() const {
   if (camera_id.empty()) return "camera_id is empty";
   if (!(fps > 0 && fps <= 240)) return "fps must be in (0, 240]";
   if (jpeg_quality < 1 || jpeg_quality > 100) return "jpeg_quality must be in 1..100";
+  if (keepalive.count() < 100 || keepalive.count() > 600000) return "keepalive must be 100 ms .. 10 min";
   if (max_frames < 0) return "max_frames must be >= 0";
   if (!(duration_s >= 0)) return "duration_s must be >= 0";
   if (backoff_initial.count() <= 0 || backoff_max < backoff_initial) return "backoff must be 0 < initial <= max";
@@ -116,7 +117,14 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
   };
 
   while (!stop.load() && !source_done) {
-    absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = net::MakeChannel(options_.server, options_.tls);
+    grpc::ChannelArguments args;
+    const int keepalive_ms = static_cast<int>(options_.keepalive.count());
+    args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, keepalive_ms);
+    args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, keepalive_ms);
+    args.SetInt(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
+    args.SetInt(GRPC_ARG_HTTP2_MAX_PINGS_WITHOUT_DATA, 0);
+    args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 2 * keepalive_ms);  // also the connect timeout
+    absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = net::MakeChannel(options_.server, options_.tls, args);
     if (!channel.ok()) return absl::InvalidArgumentError(absl::StrCat("camera '", id, "': ", channel.status().message()));
     auto stub = v1::SensorService::NewStub(*channel);
     grpc::ClientContext context;

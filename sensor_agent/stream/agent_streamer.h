@@ -35,6 +35,10 @@ struct AgentOptions {
   std::chrono::milliseconds backoff_initial{200};
   // Kept at 2 s so that an agent is back within ~2.5 s of the server's return (issue 8: 5 s).
   std::chrono::milliseconds backoff_max{2000};
+  // A link that silently stops carrying data (a blocked route, a dead Wi-Fi) is detected by HTTP/2
+  // keepalive pings: unanswered for `keepalive` after `keepalive` of silence = the link is dead,
+  // the stream fails and the agent reconnects. Also bounds a connection attempt that hangs.
+  std::chrono::milliseconds keepalive{1500};
   net::TlsClientOptions tls;  // TLS (and mutual TLS) to the server; empty ca_file = plaintext
   // Metadata kept across outages: records in memory, then spilled to `spill_path` (empty: a file
   // in the temp directory named after the camera; "-" = no spill).
