@@ -18,8 +18,8 @@ PACKAGES=(
   openssl libssl-dev
   # command lines, JSON
   libcli11-dev nlohmann-json3-dev libyaml-cpp-dev
-  # tests and benchmarks
-  libgtest-dev libgmock-dev libbenchmark-dev
+  # tests and benchmarks; clang + its runtime for the libFuzzer targets (deploy/fuzz.sh)
+  libgtest-dev libgmock-dev libbenchmark-dev clang-14 libclang-rt-14-dev
 )
 
 missing=()

@@ -9,4 +9,9 @@ start=$(date +%s)
 AVE_BUILD_DIR=$build bash "$root/deploy/build.sh"
 echo "build: $(( $(date +%s) - start )) s"
 ctest --test-dir "$build" --output-on-failure -j "${AVE_TEST_JOBS:-2}"
+# Every parser of outside input under libFuzzer for a short bounded time (clang build of its own;
+# AVE_FUZZ_SECONDS=0 skips it; the long runs are recorded in docs/RELIABILITY.md).
+if [ "${AVE_FUZZ_SECONDS:-15}" != 0 ]; then
+  AVE_FUZZ_SECONDS=${AVE_FUZZ_SECONDS:-15} AVE_FUZZ_BUILD=${AVE_FUZZ_BUILD:-$build-fuzz} bash "$root/deploy/fuzz.sh"
+fi
 echo "build + tests: $(( $(date +%s) - start )) s"

@@ -11,6 +11,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cstdlib>
 #include <filesystem>
 #include <map>
 #include <thread>
@@ -30,8 +31,13 @@ namespace ave {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-constexpr int kCameras = 10;
-constexpr int kKills = 3;
+// The CI form; AVE_FAULT_CAMERAS / AVE_FAULT_KILLS give the full form (50 streams, 10 kills).
+int EnvInt(const char* name, int fallback) {
+  const char* v = std::getenv(name);
+  return v ? std::max(1, std::atoi(v)) : fallback;
+}
+const int kCameras = EnvInt("AVE_FAULT_CAMERAS", 10);
+const int kKills = EnvInt("AVE_FAULT_KILLS", 3);
 
 class FakeSource : public FrameSource {
  public:

@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cstdlib>
 #include <filesystem>
 #include <mutex>
 #include <thread>
@@ -157,12 +158,15 @@ TEST(LinkBlock, AgentDetectsASilentLinkAndIsBackWithinFiveSecondsOfItsReturn) {
   };
   ASSERT_TRUE(wait_for([&] { return latest() >= 5; }, std::chrono::seconds(20)));
 
-  // Block the link for 6 s: nothing new may arrive, and the agent must notice and start buffering.
+  // Block the link (6 s in CI; AVE_LINK_BLOCK_S=30 for the full form): nothing new may
+  // arrive, and the agent must notice and start buffering.
+  const char* block_env = std::getenv("AVE_LINK_BLOCK_S");
+  const int block_s = block_env ? std::max(1, std::atoi(block_env)) : 6;
   proxy.SetBlocked(true);
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   const uint64_t before = latest();
   const int64_t connects_before = streamer.stats().connects;
-  std::this_thread::sleep_for(std::chrono::seconds(6));
+  std::this_thread::sleep_for(std::chrono::seconds(block_s));
   EXPECT_EQ(latest(), before) << "frames crossed a blocked link";
   const AgentStats during = streamer.stats();
   EXPECT_GT(during.connects, connects_before) << "the agent never noticed the dead link";
