@@ -25,6 +25,7 @@
 #include "grpc/health/v1/health.grpc.pb.h"
 #include "model_store/common/log.h"
 #include "model_store/db/store.h"
+#include "sensor_agent/source/fake_source.h"
 #include "sensor_agent/stream/agent_streamer.h"
 
 namespace ave {
@@ -39,24 +40,7 @@ int EnvInt(const char* name, int fallback) {
 const int kCameras = EnvInt("AVE_FAULT_CAMERAS", 10);
 const int kKills = EnvInt("AVE_FAULT_KILLS", 3);
 
-class FakeSource : public FrameSource {
- public:
-  absl::StatusOr<CapturedFrame> Next() override {
-    CapturedFrame f;
-    f.capture_time_ns = NowNs();
-    f.width = 64;
-    f.height = 48;
-    f.bgr.assign(64 * 48 * 3, static_cast<uint8_t>(n_++ * 7));
-    f.world_from_camera = LookAt({0, 0, 10}, {10, 0, 0});
-    return f;
-  }
-  PinholeIntrinsics intrinsics() const override { return PinholeIntrinsics::FromFov(64, 48, 60); }
-  std::string description() const override { return "fake"; }
-  bool live() const override { return false; }
-
- private:
-  int n_ = 0;
-};
+using fixtures::FakeSource;
 
 int FreePort() {
   const int fd = ::socket(AF_INET, SOCK_STREAM, 0);

@@ -1,5 +1,6 @@
 // The agent against a real in-process server: outages are survived with metadata replayed in order,
 // and the sensor clock's offset is measured and corrected (issue 8).
+#include "sensor_agent/source/fake_source.h"
 #include "sensor_agent/stream/agent_streamer.h"
 
 #include <unistd.h>
@@ -18,27 +19,7 @@
 namespace ave {
 namespace {
 
-// A cheap synthetic camera: flat 64x48 frames stamped by `clock`, with a pose.
-class FakeSource : public FrameSource {
- public:
-  explicit FakeSource(std::function<int64_t()> clock) : clock_(std::move(clock)) {}
-  absl::StatusOr<CapturedFrame> Next() override {
-    CapturedFrame f;
-    f.capture_time_ns = clock_();
-    f.width = 64;
-    f.height = 48;
-    f.bgr.assign(64 * 48 * 3, static_cast<uint8_t>(n_++ * 7));
-    f.world_from_camera = LookAt({0, 0, 10}, {10, 0, 0});
-    return f;
-  }
-  PinholeIntrinsics intrinsics() const override { return PinholeIntrinsics::FromFov(64, 48, 60); }
-  std::string description() const override { return "fake"; }
-  bool live() const override { return false; }
-
- private:
-  std::function<int64_t()> clock_;
-  int n_ = 0;
-};
+using fixtures::FakeSource;
 
 TEST(ClockOffsetEstimator, TakesTheSmallestRoundTrip) {
   ClockOffsetEstimator e;
