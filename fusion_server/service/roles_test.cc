@@ -120,28 +120,17 @@ class Fixture : public ::testing::Test {
   static grpc::Status Stream(grpc::Channel* channel, const std::string& camera, const std::string& token,
                              int* acks = nullptr) {
     auto stub = v1::SensorService::NewStub(std::shared_ptr<grpc::Channel>(channel, [](grpc::Channel*) {}));
-    grpc::ClientContext context;
-    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
-    auto stream = stub->Stream(&context);
-    v1::SensorMessage m;
-    m.mutable_hello()->set_camera_id(camera);
-    m.mutable_hello()->set_token(token);
-    *m.mutable_hello()->mutable_intrinsics() = ToProto(PinholeIntrinsics::FromFov(64, 48, 60));
-    stream->Write(m);
-    int read = 0;
+    v1::SensorHello hello;
+    hello.set_camera_id(camera);
+    hello.set_token(token);
+    *hello.mutable_intrinsics() = ToProto(PinholeIntrinsics::FromFov(64, 48, 60));
+    std::vector<v1::SensorFrame> frames(2);
     for (uint64_t seq = 1; seq <= 2; ++seq) {
-      v1::SensorFrame* f = m.mutable_frame();
-      f->set_sequence(seq);
-      f->set_capture_time_ns(NowNs());
-      f->set_jpeg(Jpeg(64, 48));
-      if (!stream->Write(m)) break;
-      v1::SensorAck ack;
-      if (!stream->Read(&ack)) break;
-      ++read;
+      frames[seq - 1].set_sequence(seq);
+      frames[seq - 1].set_capture_time_ns(NowNs());
+      frames[seq - 1].set_jpeg(Jpeg(64, 48));
     }
-    stream->WritesDone();
-    if (acks) *acks = read;
-    return stream->Finish();
+    return fixtures::StreamFrames(*stub, hello, frames, acks);
   }
 
   // Subscribe and read one update; the final status (OK when an update arrived and we cancelled).

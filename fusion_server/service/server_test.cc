@@ -68,23 +68,7 @@ class ServerTest : public ::testing::Test {
   // Opens a sensor stream, sends the hello and `frames`, and returns the final status with the
   // number of acks read.
   grpc::Status Stream(const v1::SensorHello& hello, const std::vector<v1::SensorFrame>& frames, int* acks = nullptr) {
-    grpc::ClientContext context;
-    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
-    auto stream = sensor_->Stream(&context);
-    v1::SensorMessage m;
-    *m.mutable_hello() = hello;
-    stream->Write(m);
-    int read = 0;
-    for (const auto& f : frames) {
-      *m.mutable_frame() = f;
-      if (!stream->Write(m)) break;
-      v1::SensorAck ack;
-      if (!stream->Read(&ack)) break;
-      ++read;
-    }
-    stream->WritesDone();
-    if (acks) *acks = read;
-    return stream->Finish();
+    return fixtures::StreamFrames(*sensor_, hello, frames, acks);
   }
 
   v1::SensorHello Hello(const std::string& id, const std::string& token = kSensor) {

@@ -6,7 +6,9 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
-#include "ave/v1/ave.pb.h"
+#include <grpcpp/grpcpp.h>
+
+#include "ave/v1/ave.grpc.pb.h"
 #include "fusion_server/core/convert.h"
 
 namespace ave::fixtures {
@@ -27,6 +29,29 @@ inline v1::Camera CameraRecord(const std::string& id) {
   *c.mutable_mounting_pose() = ToProto(LookAt({0, 0, 10}, {10, 0, 0}));
   c.set_enabled(true);
   return c;
+}
+
+// Opens a sensor stream, sends `hello` then each frame (waiting for its ack), and returns the
+// final status; `acks` receives the number of acks read.
+inline grpc::Status StreamFrames(v1::SensorService::StubInterface& stub, const v1::SensorHello& hello,
+                                 const std::vector<v1::SensorFrame>& frames, int* acks = nullptr) {
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  auto stream = stub.Stream(&context);
+  v1::SensorMessage m;
+  *m.mutable_hello() = hello;
+  stream->Write(m);
+  int read = 0;
+  for (const auto& f : frames) {
+    *m.mutable_frame() = f;
+    if (!stream->Write(m)) break;
+    v1::SensorAck ack;
+    if (!stream->Read(&ack)) break;
+    ++read;
+  }
+  stream->WritesDone();
+  if (acks) *acks = read;
+  return stream->Finish();
 }
 
 }  // namespace ave::fixtures
