@@ -7,7 +7,7 @@
 # client certificates (mutual TLS) and each streams with its own camera-bound token issued through
 # the admin API (the server keeps only the tokens' SHA-256).
 #   sudo deploy/demo.sh                 (AVE_SKIP_DEPS=1 skips the package check)
-# Output: ${AVE_DEMO_OUT:-build/demo}/quad.png, server.log, agent-*.log, ave.db, certs/
+# Output: ${AVE_DEMO_OUT:-build/demo}/quad.png, server.log, agent-*.log, ave.db, certs/, model.json
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 build=${AVE_BUILD_DIR:-$root/build}
@@ -35,6 +35,16 @@ cleanup() {
   exit $status
 }
 trap cleanup EXIT INT TERM
+
+# The static model (issue 4): the simulated airborne LiDAR survey of the campus through ave-model
+# (terrain + buildings) into the store; ave-server serves the newest static model in it. A few
+# seconds; AVE_DEMO_LIDAR=0 keeps the server's built-in campus mesh instead.
+if [ "${AVE_DEMO_LIDAR:-1}" = 1 ]; then
+  echo "demo: building the static model from the simulated airborne LiDAR"
+  "$bin/ave-sim" airborne-lidar --scenario campus --out "$out/lidar" >/dev/null
+  "$bin/ave-model" build --input "$out/lidar/campus.las" --db "$out/ave.db" --quiet >"$out/model.json" 2>"$out/model.log" ||
+    { cat "$out/model.log" >&2; echo "demo: ave-model build failed" >&2; exit 1; }
+fi
 
 echo "demo: starting ave-server (store $out/ave.db)"
 "$bin/ave-server" --listen 127.0.0.1:0 --store "$out/ave.db" \

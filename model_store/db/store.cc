@@ -5,6 +5,7 @@
 #include <cctype>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <mutex>
 #include <utility>
 
@@ -43,6 +44,35 @@ const std::vector<const char*>& Migrations() {
       CREATE TABLE tokens (
         hash TEXT PRIMARY KEY NOT NULL, role TEXT NOT NULL, camera_id TEXT NOT NULL,
         label TEXT NOT NULL, created_at_ns INTEGER NOT NULL, revoked INTEGER NOT NULL DEFAULT 0);
+      )sql",
+      // 2 -> 3: static scenes built from LiDAR (issue 4): provenance (input hash, parameters, time),
+      // terrain tiles (height grids), buildings and their fitted primitives. Polygons are blobs of
+      // little-endian doubles (x, y pairs), exact like the REAL columns.
+      R"sql(
+      CREATE TABLE scenes (
+        id INTEGER PRIMARY KEY AUTOINCREMENT, name TEXT NOT NULL,
+        origin_x REAL NOT NULL, origin_y REAL NOT NULL, origin_z REAL NOT NULL,
+        input_path TEXT NOT NULL, input_sha256 TEXT NOT NULL, parameters_json TEXT NOT NULL,
+        summary_json TEXT NOT NULL, static_model_version INTEGER REFERENCES static_models(version),
+        created_at_ns INTEGER NOT NULL);
+      CREATE TABLE terrain_tiles (
+        scene_id INTEGER NOT NULL REFERENCES scenes(id) ON DELETE CASCADE,
+        tile_col INTEGER NOT NULL, tile_row INTEGER NOT NULL,
+        min_x REAL NOT NULL, min_y REAL NOT NULL, resolution_m REAL NOT NULL,
+        cols INTEGER NOT NULL, rows INTEGER NOT NULL, format TEXT NOT NULL, data BLOB NOT NULL,
+        PRIMARY KEY (scene_id, tile_col, tile_row));
+      CREATE TABLE buildings (
+        scene_id INTEGER NOT NULL REFERENCES scenes(id) ON DELETE CASCADE, building_id INTEGER NOT NULL,
+        roof TEXT NOT NULL, footprint BLOB NOT NULL, area_m2 REAL NOT NULL, point_count INTEGER NOT NULL,
+        PRIMARY KEY (scene_id, building_id));
+      CREATE TABLE building_primitives (
+        scene_id INTEGER NOT NULL, building_id INTEGER NOT NULL, part INTEGER NOT NULL,
+        type TEXT NOT NULL, roof TEXT NOT NULL, center_x REAL NOT NULL, center_y REAL NOT NULL,
+        size_x REAL NOT NULL, size_y REAL NOT NULL, yaw_rad REAL NOT NULL, base_z_m REAL NOT NULL,
+        eave_height_m REAL NOT NULL, roof_height_m REAL NOT NULL, polygon BLOB NOT NULL,
+        rms_m REAL NOT NULL, point_count INTEGER NOT NULL,
+        PRIMARY KEY (scene_id, building_id, part),
+        FOREIGN KEY (scene_id, building_id) REFERENCES buildings(scene_id, building_id) ON DELETE CASCADE);
       )sql",
   };
   return kSteps;
@@ -128,6 +158,16 @@ class Stmt {
     if (!row.ok()) return row.status();
     return absl::OkStatus();
   }
+
+  // Clears bindings and rewinds, so one prepared statement inserts many rows.
+  absl::Status Reset() {
+    sqlite3_reset(s_);  // returns the previous step's error, already reported by Step()
+    return Check(sqlite3_clear_bindings(s_), 0);
+  }
+  template <typename T>
+  absl::Status BindAt(int index, const T& v) { return BindOne(index, v); }
+  absl::Status BindNullAt(int index) { return Check(sqlite3_bind_null(s_, index), index); }
+  bool IsNull(int col) const { return sqlite3_column_type(s_, col) == SQLITE_NULL; }
 
   double Double(int col) const { return sqlite3_column_double(s_, col); }
   int64_t Int(int col) const { return sqlite3_column_int64(s_, col); }
@@ -472,6 +512,180 @@ absl::StatusOr<std::vector<AuditEntry>> Store::ListAudit(int limit) {
     out.push_back(AuditEntry{stmt.Int(0), stmt.Int(1), stmt.Text(2), stmt.Text(3), stmt.Text(4), stmt.Text(5),
                              stmt.Text(6)});
   }
+}
+
+namespace {
+
+std::string PackPolygon(const std::vector<Eigen::Vector2d>& polygon) {
+  std::string out(polygon.size() * 2 * sizeof(double), '\0');
+  std::memcpy(out.data(), polygon.data(), out.size());  // Vector2d is two packed doubles
+  return out;
+}
+
+absl::StatusOr<std::vector<Eigen::Vector2d>> UnpackPolygon(std::string_view bytes, const std::string& what) {
+  if (bytes.size() % (2 * sizeof(double)) != 0) return absl::DataLossError(what + ": polygon blob of " + std::to_string(bytes.size()) + " bytes");
+  std::vector<Eigen::Vector2d> out(bytes.size() / (2 * sizeof(double)));
+  std::memcpy(static_cast<void*>(out.data()), bytes.data(), bytes.size());
+  return out;
+}
+
+std::string ValidateScene(const SceneRecord& scene, const std::vector<TerrainTileRecord>& tiles,
+                          const std::vector<StoredBuilding>& buildings) {
+  if (scene.name.empty() || scene.name.size() > 128) return "scene name must be 1..128 characters";
+  if (!scene.origin.allFinite()) return "scene '" + scene.name + "': origin must be finite";
+  for (const TerrainTileRecord& t : tiles) {
+    if (t.cols <= 0 || t.rows <= 0 || !(t.resolution_m > 0) || !std::isfinite(t.min_x) || !std::isfinite(t.min_y)) {
+      return "scene '" + scene.name + "': terrain tile (" + std::to_string(t.tile_col) + ", " + std::to_string(t.tile_row) +
+             ") needs cols, rows, resolution_m > 0 and a finite corner";
+    }
+  }
+  for (const StoredBuilding& b : buildings) {
+    if (!std::isfinite(b.area_m2)) return "scene '" + scene.name + "': building " + std::to_string(b.building_id) + " area must be finite";
+  }
+  return {};
+}
+
+}  // namespace
+
+absl::StatusOr<int64_t> Store::PutScene(const SceneRecord& scene, const std::vector<TerrainTileRecord>& tiles,
+                                        const std::vector<StoredBuilding>& buildings) {
+  if (std::string why = ValidateScene(scene, tiles, buildings); !why.empty()) return absl::InvalidArgumentError(why);
+  std::lock_guard lock(impl_->mu);
+  Db& db = *impl_->db;
+  Transaction txn(db);
+  AVE_RETURN_IF_ERROR(txn.Begin());
+  AVE_ASSIGN_OR_RETURN(insert_scene, Stmt::Prepare(db,
+                                                   "INSERT INTO scenes (name, origin_x, origin_y, origin_z, input_path, "
+                                                   "input_sha256, parameters_json, summary_json, static_model_version, "
+                                                   "created_at_ns) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)"));
+  AVE_RETURN_IF_ERROR(insert_scene.Bind(scene.name, scene.origin.x(), scene.origin.y(), scene.origin.z(), scene.input_path,
+                                        scene.input_sha256, scene.parameters_json, scene.summary_json));
+  AVE_RETURN_IF_ERROR(scene.static_model_version ? insert_scene.BindAt(9, *scene.static_model_version) : insert_scene.BindNullAt(9));
+  AVE_RETURN_IF_ERROR(insert_scene.BindAt(10, NowNs()));
+  AVE_RETURN_IF_ERROR(insert_scene.Run());
+  const int64_t id = sqlite3_last_insert_rowid(db.get());
+  AVE_ASSIGN_OR_RETURN(insert_tile, Stmt::Prepare(db,
+                                                  "INSERT INTO terrain_tiles (scene_id, tile_col, tile_row, min_x, min_y, "
+                                                  "resolution_m, cols, rows, format, data) VALUES (?,?,?,?,?,?,?,?,?,?)"));
+  for (const TerrainTileRecord& t : tiles) {
+    AVE_RETURN_IF_ERROR(insert_tile.Reset());
+    AVE_RETURN_IF_ERROR(insert_tile.Bind(id, t.tile_col, t.tile_row, t.min_x, t.min_y, t.resolution_m, t.cols, t.rows, t.format, Blob{t.data}));
+    AVE_RETURN_IF_ERROR(insert_tile.Run());
+  }
+  AVE_ASSIGN_OR_RETURN(insert_building, Stmt::Prepare(db,
+                                                      "INSERT INTO buildings (scene_id, building_id, roof, footprint, area_m2, "
+                                                      "point_count) VALUES (?,?,?,?,?,?)"));
+  AVE_ASSIGN_OR_RETURN(insert_part, Stmt::Prepare(db,
+                                                  "INSERT INTO building_primitives (scene_id, building_id, part, type, roof, "
+                                                  "center_x, center_y, size_x, size_y, yaw_rad, base_z_m, eave_height_m, "
+                                                  "roof_height_m, polygon, rms_m, point_count) "
+                                                  "VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)"));
+  for (const StoredBuilding& b : buildings) {
+    AVE_RETURN_IF_ERROR(insert_building.Reset());
+    const std::string footprint = PackPolygon(b.footprint_m);
+    AVE_RETURN_IF_ERROR(insert_building.Bind(id, b.building_id, b.roof, Blob{footprint}, b.area_m2, b.point_count));
+    AVE_RETURN_IF_ERROR(insert_building.Run());
+    for (size_t k = 0; k < b.parts.size(); ++k) {
+      const PrimitiveRecord& p = b.parts[k];
+      const std::string polygon = PackPolygon(p.polygon_m);
+      AVE_RETURN_IF_ERROR(insert_part.Reset());
+      AVE_RETURN_IF_ERROR(insert_part.Bind(id, b.building_id, static_cast<int64_t>(k), p.type, p.roof, p.center_m.x(), p.center_m.y(),
+                                           p.size_m.x(), p.size_m.y(), p.yaw_rad, p.base_z_m, p.eave_height_m, p.roof_height_m,
+                                           Blob{polygon}, p.rms_m, p.point_count));
+      AVE_RETURN_IF_ERROR(insert_part.Run());
+    }
+  }
+  AVE_RETURN_IF_ERROR(txn.Commit());
+  return id;
+}
+
+absl::StatusOr<std::vector<SceneRecord>> Store::ListScenes() {
+  std::lock_guard lock(impl_->mu);
+  AVE_ASSIGN_OR_RETURN(stmt, Stmt::Prepare(*impl_->db,
+                                           "SELECT id, name, origin_x, origin_y, origin_z, input_path, input_sha256, "
+                                           "parameters_json, summary_json, static_model_version, created_at_ns "
+                                           "FROM scenes ORDER BY id"));
+  std::vector<SceneRecord> out;
+  for (;;) {
+    AVE_ASSIGN_OR_RETURN(row, stmt.Step());
+    if (!row) return out;
+    SceneRecord s;
+    s.id = stmt.Int(0);
+    s.name = stmt.Text(1);
+    s.origin = {stmt.Double(2), stmt.Double(3), stmt.Double(4)};
+    s.input_path = stmt.Text(5);
+    s.input_sha256 = stmt.Text(6);
+    s.parameters_json = stmt.Text(7);
+    s.summary_json = stmt.Text(8);
+    if (!stmt.IsNull(9)) s.static_model_version = stmt.Int(9);
+    s.created_at_ns = stmt.Int(10);
+    out.push_back(std::move(s));
+  }
+}
+
+absl::StatusOr<std::vector<TerrainTileRecord>> Store::GetTerrainTiles(int64_t scene_id) {
+  std::lock_guard lock(impl_->mu);
+  AVE_ASSIGN_OR_RETURN(stmt, Stmt::Prepare(*impl_->db,
+                                           "SELECT tile_col, tile_row, min_x, min_y, resolution_m, cols, rows, format, data "
+                                           "FROM terrain_tiles WHERE scene_id = ? ORDER BY tile_row, tile_col"));
+  AVE_RETURN_IF_ERROR(stmt.Bind(scene_id));
+  std::vector<TerrainTileRecord> out;
+  for (;;) {
+    AVE_ASSIGN_OR_RETURN(row, stmt.Step());
+    if (!row) return out;
+    out.push_back(TerrainTileRecord{static_cast<int>(stmt.Int(0)), static_cast<int>(stmt.Int(1)), stmt.Double(2), stmt.Double(3),
+                                    stmt.Double(4), static_cast<int>(stmt.Int(5)), static_cast<int>(stmt.Int(6)), stmt.Text(7),
+                                    std::string(stmt.BlobAt(8))});
+  }
+}
+
+absl::StatusOr<std::vector<StoredBuilding>> Store::GetBuildings(int64_t scene_id) {
+  std::lock_guard lock(impl_->mu);
+  const std::string what = "model store '" + path() + "': scene " + std::to_string(scene_id);
+  AVE_ASSIGN_OR_RETURN(stmt, Stmt::Prepare(*impl_->db,
+                                           "SELECT building_id, roof, footprint, area_m2, point_count FROM buildings "
+                                           "WHERE scene_id = ? ORDER BY building_id"));
+  AVE_RETURN_IF_ERROR(stmt.Bind(scene_id));
+  std::vector<StoredBuilding> out;
+  for (;;) {
+    AVE_ASSIGN_OR_RETURN(row, stmt.Step());
+    if (!row) break;
+    StoredBuilding b;
+    b.building_id = stmt.Int(0);
+    b.roof = stmt.Text(1);
+    AVE_ASSIGN_OR_RETURN(footprint, UnpackPolygon(stmt.BlobAt(2), what));
+    b.footprint_m = std::move(footprint);
+    b.area_m2 = stmt.Double(3);
+    b.point_count = stmt.Int(4);
+    out.push_back(std::move(b));
+  }
+  AVE_ASSIGN_OR_RETURN(parts, Stmt::Prepare(*impl_->db,
+                                            "SELECT type, roof, center_x, center_y, size_x, size_y, yaw_rad, base_z_m, "
+                                            "eave_height_m, roof_height_m, polygon, rms_m, point_count "
+                                            "FROM building_primitives WHERE scene_id = ? AND building_id = ? ORDER BY part"));
+  for (StoredBuilding& b : out) {
+    AVE_RETURN_IF_ERROR(parts.Reset());
+    AVE_RETURN_IF_ERROR(parts.Bind(scene_id, b.building_id));
+    for (;;) {
+      AVE_ASSIGN_OR_RETURN(row, parts.Step());
+      if (!row) break;
+      PrimitiveRecord p;
+      p.type = parts.Text(0);
+      p.roof = parts.Text(1);
+      p.center_m = {parts.Double(2), parts.Double(3)};
+      p.size_m = {parts.Double(4), parts.Double(5)};
+      p.yaw_rad = parts.Double(6);
+      p.base_z_m = parts.Double(7);
+      p.eave_height_m = parts.Double(8);
+      p.roof_height_m = parts.Double(9);
+      AVE_ASSIGN_OR_RETURN(polygon, UnpackPolygon(parts.BlobAt(10), what));
+      p.polygon_m = std::move(polygon);
+      p.rms_m = parts.Double(11);
+      p.point_count = parts.Int(12);
+      b.parts.push_back(std::move(p));
+    }
+  }
+  return out;
 }
 
 }  // namespace ave::store

@@ -1,5 +1,6 @@
 #pragma once
-// The model store: cameras, versioned static scene meshes and an append-only audit log in one
+// The model store: cameras, versioned static scene meshes, an append-only audit log and LiDAR-built
+// scenes (terrain tiles, buildings, provenance) in one
 // SQLite file (MISSION part A). SQLite stays behind this interface; callers see absl::Status.
 //
 // File layout: see the migration list in store.cc. Doubles are stored as SQLite REAL (IEEE-754
@@ -54,6 +55,47 @@ struct TokenRecord {
   bool revoked = false;
 };
 
+// A static scene built from LiDAR (issue 4, schema v3) with its provenance: which input (path
+// and SHA-256 of its bytes), which parameters (JSON), when; the summary (JSON) and the static
+// model version the assembled mesh was stored as.
+struct SceneRecord {
+  int64_t id = 0;  // set by the store
+  std::string name;
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();  // world coordinates of the local zero
+  std::string input_path, input_sha256, parameters_json, summary_json;
+  std::optional<int64_t> static_model_version;
+  int64_t created_at_ns = 0;  // set by the store
+};
+
+// One tile of a height grid: `data` is the encoded grid (format "exr": an OpenEXR file as written
+// by terrain/mesh_export.h WriteHeightExr), corner and resolution in the scene's local frame.
+struct TerrainTileRecord {
+  int tile_col = 0, tile_row = 0;
+  double min_x = 0, min_y = 0, resolution_m = 0;
+  int cols = 0, rows = 0;
+  std::string format;
+  std::string data;
+};
+
+// A fitted primitive and a building as plain fields (names of types as text: "box", "gable", ...),
+// so the store needs nothing from the buildings library.
+struct PrimitiveRecord {
+  std::string type, roof;
+  Eigen::Vector2d center_m = Eigen::Vector2d::Zero(), size_m = Eigen::Vector2d::Zero();
+  double yaw_rad = 0, base_z_m = 0, eave_height_m = 0, roof_height_m = 0;
+  std::vector<Eigen::Vector2d> polygon_m;
+  double rms_m = 0;
+  int64_t point_count = 0;
+};
+struct StoredBuilding {
+  int64_t building_id = 0;
+  std::string roof;
+  std::vector<Eigen::Vector2d> footprint_m;
+  double area_m2 = 0;
+  int64_t point_count = 0;
+  std::vector<PrimitiveRecord> parts;  // main part first
+};
+
 // Empty when the record may be stored; otherwise names the camera and the first bad field, e.g.
 // "camera 'gate-1': intrinsics.fx must be finite and > 0". A rotation with |1 - |q|| <= 1e-3 is
 // accepted (and normalised when stored); further from unit, or non-finite, is rejected.
@@ -97,6 +139,14 @@ class Store {
   // when none matches. Revoked rows stay (the audit table names them).
   absl::Status RevokeToken(const std::string& hash_prefix);
   absl::StatusOr<std::vector<TokenRecord>> ListTokens();  // oldest first, revoked included
+
+  // Scenes (schema v3): the scene row, its terrain tiles and buildings in one transaction; returns
+  // the scene id. InvalidArgument naming the scene and field for a non-finite origin or bad tile.
+  absl::StatusOr<int64_t> PutScene(const SceneRecord& scene, const std::vector<TerrainTileRecord>& tiles,
+                                   const std::vector<StoredBuilding>& buildings);
+  absl::StatusOr<std::vector<SceneRecord>> ListScenes();  // oldest first
+  absl::StatusOr<std::vector<TerrainTileRecord>> GetTerrainTiles(int64_t scene_id);
+  absl::StatusOr<std::vector<StoredBuilding>> GetBuildings(int64_t scene_id);  // by building_id, parts in order
 
  private:
   class Impl;

@@ -448,5 +448,71 @@ TEST(Store, Token_StoresHashesOnlyAndRevokesByPrefix) {
   }
 }
 
+TEST(StoreScenes, SceneTilesBuildingsAndProvenanceRoundTripExactly) {
+  auto store = OpenOrDie(":memory:");
+  ASSERT_TRUE(store);
+  auto model = store->PutStaticModel("lidar", TriangleMesh{});
+  ASSERT_TRUE(model.ok()) << model.status();
+  SceneRecord scene;
+  scene.name = "campus";
+  scene.origin = {384500.0, 3768200.0, 85.0};
+  scene.input_path = "/data/campus.las";
+  scene.input_sha256 = std::string(64, 'a');
+  scene.parameters_json = R"({"resolution_m":0.5})";
+  scene.summary_json = R"({"points":10})";
+  scene.static_model_version = *model;
+  TerrainTileRecord tile{0, 0, -120.25, -119.75, 0.5, 481, 480, "exr", std::string("\0\1binary", 8)};
+  StoredBuilding b;
+  b.building_id = 3;
+  b.roof = "gable";
+  b.footprint_m = {{0.1, 0.2}, {10.3, 0.2}, {10.3, 8.7}};
+  b.area_m2 = 43.125;
+  b.point_count = 512;
+  PrimitiveRecord p;
+  p.type = "wedge";
+  p.roof = "gable";
+  p.center_m = {5.2, 4.45};
+  p.size_m = {10.2, 8.5};
+  p.yaw_rad = 0.1234567890123;
+  p.base_z_m = 1.5;
+  p.eave_height_m = 6;
+  p.roof_height_m = 2.5;
+  p.rms_m = 0.04;
+  p.point_count = 500;
+  b.parts = {p, p};
+  b.parts[1].type = "box";
+  auto id = store->PutScene(scene, {tile}, {b});
+  ASSERT_TRUE(id.ok()) << id.status();
+  auto scenes = store->ListScenes();
+  ASSERT_TRUE(scenes.ok());
+  ASSERT_EQ(scenes->size(), 1u);
+  EXPECT_EQ(scenes->at(0).origin, scene.origin);
+  EXPECT_EQ(scenes->at(0).input_sha256, scene.input_sha256);
+  EXPECT_EQ(scenes->at(0).parameters_json, scene.parameters_json);
+  EXPECT_EQ(scenes->at(0).static_model_version, *model);
+  EXPECT_GT(scenes->at(0).created_at_ns, 0);
+  auto tiles = store->GetTerrainTiles(*id);
+  ASSERT_TRUE(tiles.ok());
+  ASSERT_EQ(tiles->size(), 1u);
+  EXPECT_EQ(tiles->at(0).data, tile.data);
+  EXPECT_EQ(tiles->at(0).min_x, tile.min_x);
+  auto buildings = store->GetBuildings(*id);
+  ASSERT_TRUE(buildings.ok()) << buildings.status();
+  ASSERT_EQ(buildings->size(), 1u);
+  EXPECT_EQ(buildings->at(0).footprint_m, b.footprint_m);
+  ASSERT_EQ(buildings->at(0).parts.size(), 2u);
+  EXPECT_EQ(buildings->at(0).parts[0].yaw_rad, p.yaw_rad);
+  EXPECT_EQ(buildings->at(0).parts[1].type, "box");
+  // Bad input names the scene and field; a scene without a model version stores NULL.
+  scene.origin.x() = std::nan("");
+  EXPECT_THAT(std::string(store->PutScene(scene, {}, {}).status().message()), HasSubstr("origin must be finite"));
+  scene.origin.x() = 1;
+  scene.static_model_version.reset();
+  tile.cols = 0;
+  EXPECT_THAT(std::string(store->PutScene(scene, {tile}, {}).status().message()), HasSubstr("terrain tile (0, 0)"));
+  ASSERT_TRUE(store->PutScene(scene, {}, {}).ok());
+  EXPECT_FALSE(store->ListScenes()->back().static_model_version.has_value());
+}
+
 }  // namespace
 }  // namespace ave::store

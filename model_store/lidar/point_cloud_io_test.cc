@@ -1,0 +1,68 @@
+#include "model_store/lidar/point_cloud_io.h"
+
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "model_store/lidar/read_file.h"
+
+namespace ave::model {
+namespace {
+
+using ::testing::HasSubstr;
+
+TEST(Ply, AsciiRejectsAndCountsNonFinitePoints) {
+  const std::string ply =
+      "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\nproperty float z\n"
+      "property uchar intensity\nend_header\n"
+      "1 2 3 10\nnan 2 3 11\n4 inf 6 12\n7 8 9 13\n1 1 -inf 14\n";
+  absl::StatusOr<PointCloud> cloud = ParsePly(ply, "a.ply");
+  ASSERT_TRUE(cloud.ok()) << cloud.status();
+  EXPECT_EQ(cloud->size(), 2u);
+  EXPECT_EQ(cloud->rejected_non_finite, 3u);
+  ASSERT_EQ(cloud->intensity.size(), 2u);
+  EXPECT_EQ(cloud->intensity[1], 13);
+  EXPECT_EQ(cloud->origin + cloud->xyz[1].cast<double>(), Eigen::Vector3d(7, 8, 9));
+}
+
+TEST(Ply, BinaryDoublesNear1e7KeepMillimetres) {
+  std::string ply = "ply\nformat binary_little_endian 1.0\nelement vertex 2\nproperty double x\nproperty double y\nproperty double z\nend_header\n";
+  const double pts[6] = {4512345.678, 12345678.901, 250.004, 4512346.679, 12345679.902, 251.005};
+  ply.append(reinterpret_cast<const char*>(pts), sizeof(pts));
+  absl::StatusOr<PointCloud> cloud = ParsePly(ply, "b.ply");
+  ASSERT_TRUE(cloud.ok()) << cloud.status();
+  ASSERT_EQ(cloud->size(), 2u);
+  const Eigen::Vector3d p1 = cloud->origin + cloud->xyz[1].cast<double>();
+  EXPECT_NEAR(p1.x(), 4512346.679, 1e-4);
+  EXPECT_NEAR(p1.y(), 12345679.902, 1e-4);
+  // Truncated: one vertex short.
+  absl::Status cut = ParsePly(ply.substr(0, ply.size() - 8), "c.ply").status();
+  EXPECT_THAT(std::string(cut.message()), HasSubstr("c.ply: byte offset"));
+}
+
+TEST(PointCloudIo, DispatchesByExtensionAndNamesUnknownOnes) {
+  EXPECT_THAT(std::string(ReadPointCloud("/tmp/x.xyz").status().message()), HasSubstr("unknown point cloud extension"));
+  EXPECT_THAT(std::string(ReadPointCloud("/tmp/x.laz").status().message()), HasSubstr("LAZ"));
+}
+
+TEST(PointCloudIo, ReadsPcdThroughPcl) {
+  if (!HavePcdSupport()) GTEST_SKIP() << "built without PCL";
+  const std::string path = ::testing::TempDir() + "/ave_cloud.pcd";
+  ASSERT_TRUE(WriteWholeFile(path,
+                             "VERSION .7\nFIELDS x y z intensity\nSIZE 8 8 8 4\nTYPE F F F F\nCOUNT 1 1 1 1\n"
+                             "WIDTH 3\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 3\nDATA ascii\n"
+                             "384500.125 3768200.5 85.25 7\nnan 0 0 1\n384501.125 3768201.5 86.25 9\n")
+                  .ok());
+  absl::StatusOr<PointCloud> cloud = ReadPointCloud(path);
+  ASSERT_TRUE(cloud.ok()) << cloud.status();
+  ASSERT_EQ(cloud->size(), 2u);
+  EXPECT_EQ(cloud->rejected_non_finite, 1u);
+  EXPECT_NEAR((cloud->origin + cloud->xyz[1].cast<double>()).y(), 3768201.5, 1e-4);
+  std::remove(path.c_str());
+}
+
+}  // namespace
+}  // namespace ave::model

@@ -1,0 +1,16 @@
+#pragma once
+// Whole-file reads and writes with errors that name the path (shared by the LiDAR readers and the
+// terrain exporters).
+#include <string>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+
+namespace ave::model {
+
+absl::StatusOr<std::string> ReadWholeFile(const std::string& path);
+absl::Status WriteWholeFile(const std::string& path, const std::string& bytes);
+// The file name's extension after the last dot, lower-case ("" when none): picks the format.
+std::string LowerExtension(const std::string& path);
+
+}  // namespace ave::model
