@@ -18,6 +18,7 @@
 #include "fusion_server/admin/admin_client.h"
 #include "fusion_server/core/convert.h"
 #include "model_store/common/cli.h"
+#include "model_store/scene/intrinsics_file.h"
 
 namespace {
 
@@ -46,12 +47,14 @@ int main(int argc, char** argv) {
   app.add_subcommand("list", "list registered cameras as JSON");
   std::string id, name, source, size = "640x480", position, look_at, quaternion;
   double fov_deg = 60;
+  std::string intrinsics_file;
   bool disabled = false;
   auto add_camera_flags = [&](CLI::App* sub) {
     sub->add_option("--id", id, "camera id ([A-Za-z0-9_.-], 1..64)")->required();
     sub->add_option("--name", name, "display name");
     sub->add_option("--size", size, "image size WIDTHxHEIGHT")->capture_default_str();
     sub->add_option("--fov", fov_deg, "horizontal field of view, degrees")->capture_default_str();
+    sub->add_option("--intrinsics", intrinsics_file, "intrinsics YAML from ave-calibrate (replaces --size and --fov)");
     sub->add_option("--position", position, "camera centre x,y,z in the site's local frame (m)")->required();
     sub->add_option("--look-at", look_at, "point x,y,z the camera looks at");
     sub->add_option("--quaternion", quaternion, "world_from_camera rotation w,x,y,z (instead of --look-at)");
@@ -163,6 +166,11 @@ int main(int argc, char** argv) {
   camera.set_id(id);
   camera.set_name(name.empty() ? id : name);
   *camera.mutable_intrinsics() = ave::ToProto(ave::PinholeIntrinsics::FromFov(width, height, fov_deg));
+  if (!intrinsics_file.empty()) {
+    auto intrinsics = ave::calib::ReadIntrinsicsFile(intrinsics_file);
+    if (!intrinsics.ok()) return Fail("--intrinsics: " + std::string(intrinsics.status().message()));
+    *camera.mutable_intrinsics() = ave::ToProto(*intrinsics);
+  }
   *camera.mutable_mounting_pose() = ave::ToProto(pose);
   camera.set_source_url(source);
   camera.set_enabled(!disabled);

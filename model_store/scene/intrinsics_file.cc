@@ -1,0 +1,65 @@
+#include "model_store/scene/intrinsics_file.h"
+
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+#include "absl/strings/str_cat.h"
+#include "model_store/scene/yaml_fields.h"
+
+namespace ave::calib {
+
+absl::StatusOr<PinholeIntrinsics> ParseIntrinsicsYaml(const std::string& text, const std::string& label) {
+  namespace y = scene::yaml;
+  try {
+    const YAML::Node root = y::ParseYamlText(text);
+    const y::Map m(root, "intrinsics");
+    m.AllowOnly({"width", "height", "fx", "fy", "cx", "cy", "distortion", "rms_px", "images_used"});
+    PinholeIntrinsics k;
+    k.width = static_cast<int>(m.Number("width"));
+    k.height = static_cast<int>(m.Number("height"));
+    m.RequireRange("width", m.Number("width"), 1, 100000);
+    m.RequireRange("height", m.Number("height"), 1, 100000);
+    k.fx = m.Number("fx");
+    k.fy = m.Number("fy");
+    k.cx = m.Number("cx");
+    k.cy = m.Number("cy");
+    m.RequirePositive("fx", k.fx);
+    m.RequirePositive("fy", k.fy);
+    if (m.Has("distortion")) {
+      const std::vector<double> d = m.Numbers("distortion", 5, 5);
+      for (size_t i = 0; i < 5; ++i) k.distortion[i] = d[i];
+    }
+    if (const std::string why = k.Check(); !why.empty()) y::Fail(root, "intrinsics", why);
+    return k;
+  } catch (const y::FieldError& e) {
+    return absl::InvalidArgumentError(y::FormatFieldError(label, e));
+  }
+}
+
+absl::StatusOr<PinholeIntrinsics> ReadIntrinsicsFile(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) return absl::NotFoundError(absl::StrCat("cannot open intrinsics file ", path));
+  std::stringstream text;
+  text << in.rdbuf();
+  return ParseIntrinsicsYaml(text.str(), path);
+}
+
+absl::Status WriteIntrinsicsFile(const std::string& path, const PinholeIntrinsics& k, double rms_px, int images_used) {
+  std::ofstream out(path);
+  if (!out) return absl::InternalError(absl::StrCat("cannot write ", path));
+  char buf[512];
+  std::snprintf(buf, sizeof(buf),
+                "# Camera intrinsics (Zhang's method, ave-calibrate); pixel centres at integers (OpenCV).\n"
+                "width: %d\nheight: %d\nfx: %.10g\nfy: %.10g\ncx: %.10g\ncy: %.10g\ndistortion: [%.10g, %.10g, %.10g, %.10g, %.10g]\n",
+                k.width, k.height, k.fx, k.fy, k.cx, k.cy, k.distortion[0], k.distortion[1], k.distortion[2], k.distortion[3],
+                k.distortion[4]);
+  out << buf;
+  if (rms_px >= 0) out << "rms_px: " << rms_px << "\n";
+  if (images_used >= 0) out << "images_used: " << images_used << "\n";
+  out.flush();
+  if (!out) return absl::InternalError(absl::StrCat("write failed: ", path));
+  return absl::OkStatus();
+}
+
+}  // namespace ave::calib

@@ -1,0 +1,237 @@
+#include "sensor_agent/pose/pose_ekf.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Cholesky>
+
+#include "sensor_agent/pose/so3.h"
+
+namespace ave::pose {
+namespace {
+
+constexpr double kMinDepth_m = 0.1;
+
+bool AllFinite(const auto& m) { return m.allFinite(); }
+
+// Signed pixel distances of a, b from the image of the infinite 3D line seen from (p, q).
+std::optional<Eigen::Vector2d> LineDistances(const PinholeIntrinsics& k, const Line3d& line, const Eigen::Vector2d& a,
+                                             const Eigen::Vector2d& b, const Eigen::Vector3d& p, const Eigen::Quaterniond& q) {
+  const Eigen::Vector3d d = line.direction.normalized();
+  const Eigen::Vector3d rel = line.point - p;
+  // Some of the line must lie in front of the camera: it runs towards or away from the view
+  // direction, or (parallel to the image plane) its nearest point is in front.
+  const Eigen::Vector3d nearest = q.conjugate() * (rel - rel.dot(d) * d);
+  if (std::abs((q.conjugate() * d).z()) < 1e-6 && !(nearest.z() > kMinDepth_m)) return std::nullopt;
+  const Eigen::Vector3d n = q.conjugate() * rel.cross(d);  // normal of the plane through the centre and the line
+  // Image line l = K^-T n.
+  const Eigen::Vector3d l(n.x() / k.fx, n.y() / k.fy, n.z() - n.x() * k.cx / k.fx - n.y() * k.cy / k.fy);
+  const double norm = l.head<2>().norm();
+  if (!(norm > 1e-12 * l.norm())) return std::nullopt;  // the line passes through the camera centre
+  return Eigen::Vector2d((l.head<2>().dot(a) + l.z()) / norm, (l.head<2>().dot(b) + l.z()) / norm);
+}
+
+}  // namespace
+
+std::string PoseFilterOptions::Check() const {
+  auto positive = [](double x) { return std::isfinite(x) && x > 0; };
+  if (!positive(accel_noise_m_s2)) return "accel_noise_m_s2 must be finite and > 0";
+  if (!positive(angular_accel_noise_rad_s2)) return "angular_accel_noise_rad_s2 must be finite and > 0";
+  if (!positive(gps_min_sigma_m)) return "gps_min_sigma_m must be finite and > 0";
+  if (!positive(orientation_sigma_deg)) return "orientation_sigma_deg must be finite and > 0";
+  if (!positive(gyro_sigma_rad_s)) return "gyro_sigma_rad_s must be finite and > 0";
+  if (!positive(pixel_sigma_px)) return "pixel_sigma_px must be finite and > 0";
+  if (!positive(gate_chi2_3dof) || !positive(gate_chi2_2dof)) return "gate_chi2_* must be finite and > 0";
+  if (!positive(max_predict_s)) return "max_predict_s must be finite and > 0";
+  if (!positive(min_variance)) return "min_variance must be finite and > 0";
+  return {};
+}
+
+const char* RejectionName(Rejection r) {
+  switch (r) {
+    case Rejection::kNone: return "accepted";
+    case Rejection::kNotFinite: return "not finite";
+    case Rejection::kGate: return "outside the Mahalanobis gate";
+    case Rejection::kBehindCamera: return "behind the camera";
+    case Rejection::kTimeNotIncreasing: return "time not increasing";
+  }
+  return "?";
+}
+
+PoseEkf::PoseEkf(PoseFilterOptions options) : options_(options) {}
+
+void PoseEkf::Initialize(int64_t t_ns, const Rigid3d& world_from_camera, double position_sigma_m, double orientation_sigma_rad) {
+  t_ns_ = t_ns;
+  p_ = world_from_camera.translation;
+  q_ = world_from_camera.rotation.normalized();
+  v_.setZero();
+  w_.setZero();
+  Vector12d sigma;
+  sigma << Eigen::Vector3d::Constant(position_sigma_m), Eigen::Vector3d::Constant(1.0),
+      Eigen::Vector3d::Constant(orientation_sigma_rad), Eigen::Vector3d::Constant(0.5);
+  P_ = sigma.cwiseAbs2().asDiagonal();
+  initialized_ = true;
+}
+
+UpdateResult PoseEkf::Predict(int64_t t_ns) {
+  if (t_ns < t_ns_) return {Rejection::kTimeNotIncreasing, 0};
+  double remaining = static_cast<double>(t_ns - t_ns_) * 1e-9;
+  t_ns_ = t_ns;
+  while (remaining > 0) {
+    const double dt = std::min(remaining, options_.max_predict_s);
+    remaining -= dt;
+    p_ += v_ * dt;
+    q_ = (SO3Exp(w_ * dt) * q_).normalized();
+    // Error-state transition: dp += dv dt, dtheta += dw dt (first order in the world frame).
+    Matrix12d F = Matrix12d::Identity();
+    F.block<3, 3>(kPos, kVel).diagonal().setConstant(dt);
+    F.block<3, 3>(kRot, kRate).diagonal().setConstant(dt);
+    // White-noise-acceleration process: per axis q [dt^3/3 dt^2/2; dt^2/2 dt].
+    Matrix12d Q = Matrix12d::Zero();
+    const double qa = options_.accel_noise_m_s2 * options_.accel_noise_m_s2;
+    const double qw = options_.angular_accel_noise_rad_s2 * options_.angular_accel_noise_rad_s2;
+    for (auto [first, second, q] : {std::tuple{kPos, kVel, qa}, std::tuple{kRot, kRate, qw}}) {
+      Q.block<3, 3>(first, first).diagonal().setConstant(q * dt * dt * dt / 3);
+      Q.block<3, 3>(first, second).diagonal().setConstant(q * dt * dt / 2);
+      Q.block<3, 3>(second, first).diagonal().setConstant(q * dt * dt / 2);
+      Q.block<3, 3>(second, second).diagonal().setConstant(q * dt);
+    }
+    P_ = F * P_ * F.transpose() + Q;
+    Condition();
+  }
+  return {};
+}
+
+template <int M>
+UpdateResult PoseEkf::Correct(const Eigen::Matrix<double, M, 1>& innovation, const Eigen::Matrix<double, M, 12>& H,
+                              const Eigen::Matrix<double, M, M>& R, double gate_chi2) {
+  if (!AllFinite(innovation) || !AllFinite(H) || !AllFinite(R)) return {Rejection::kNotFinite, 0};
+  const Eigen::Matrix<double, 12, M> PHt = P_ * H.transpose();
+  const Eigen::Matrix<double, M, M> S = H * PHt + R;
+  const Eigen::LDLT<Eigen::Matrix<double, M, M>> ldlt(S);
+  if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().array() > 0).all()) return {Rejection::kNotFinite, 0};
+  const double d2 = innovation.dot(ldlt.solve(innovation));
+  if (!std::isfinite(d2)) return {Rejection::kNotFinite, 0};
+  if (d2 > gate_chi2) return {Rejection::kGate, d2};
+  const Eigen::Matrix<double, 12, M> K = ldlt.solve(PHt.transpose()).transpose();
+  const Matrix12d I_KH = Matrix12d::Identity() - K * H;
+  P_ = I_KH * P_ * I_KH.transpose() + K * R * K.transpose();  // Joseph form
+  Inject(K * innovation);
+  Condition();
+  return {Rejection::kNone, d2};
+}
+
+void PoseEkf::Inject(const Vector12d& dx) {
+  p_ += dx.segment<3>(kPos);
+  v_ += dx.segment<3>(kVel);
+  const Eigen::Vector3d dtheta = dx.segment<3>(kRot);
+  q_ = (SO3Exp(dtheta) * q_).normalized();
+  w_ += dx.segment<3>(kRate);
+  // Reset Jacobian of the world-frame orientation error: G = I - [dtheta/2]x (Solà, eq. 287).
+  Matrix12d G = Matrix12d::Identity();
+  G.block<3, 3>(kRot, kRot) -= 0.5 * Skew(dtheta);
+  P_ = G * P_ * G.transpose();
+}
+
+void PoseEkf::Condition() {
+  P_ = (0.5 * (P_ + P_.transpose())).eval();
+  for (int i = 0; i < 12; ++i) P_(i, i) = std::max(P_(i, i), options_.min_variance);
+}
+
+UpdateResult PoseEkf::UpdatePosition(const Eigen::Vector3d& position_m, const Eigen::Matrix3d& covariance) {
+  Eigen::Matrix3d R = 0.5 * (covariance + covariance.transpose());
+  const double floor = options_.gps_min_sigma_m * options_.gps_min_sigma_m;
+  for (int i = 0; i < 3; ++i) R(i, i) = std::max(R(i, i), floor);
+  Eigen::Matrix<double, 3, 12> H = Eigen::Matrix<double, 3, 12>::Zero();
+  H.block<3, 3>(0, kPos).setIdentity();
+  return Correct<3>(position_m - p_, H, R, options_.gate_chi2_3dof);
+}
+
+UpdateResult PoseEkf::UpdateOrientation(const Eigen::Quaterniond& world_from_camera, double sigma_rad) {
+  if (!world_from_camera.coeffs().allFinite() || world_from_camera.norm() < 1e-6) return {Rejection::kNotFinite, 0};
+  // Measured = Exp(dtheta) * q  =>  innovation = Log(measured * q^-1), world frame.
+  const Eigen::Vector3d innovation = SO3Log(world_from_camera.normalized() * q_.conjugate());
+  Eigen::Matrix<double, 3, 12> H = Eigen::Matrix<double, 3, 12>::Zero();
+  H.block<3, 3>(0, kRot).setIdentity();
+  const Eigen::Matrix3d R = Eigen::Matrix3d::Identity() * sigma_rad * sigma_rad;
+  return Correct<3>(innovation, H, R, options_.gate_chi2_3dof);
+}
+
+UpdateResult PoseEkf::UpdateRate(const Eigen::Vector3d& rate_in_camera_rad_s, double sigma_rad_s) {
+  // The gyro measures the body rate; in the world frame it is q * rate (orientation error neglected).
+  const Eigen::Vector3d measured = q_ * rate_in_camera_rad_s;
+  Eigen::Matrix<double, 3, 12> H = Eigen::Matrix<double, 3, 12>::Zero();
+  H.block<3, 3>(0, kRate).setIdentity();
+  const Eigen::Matrix3d R = Eigen::Matrix3d::Identity() * sigma_rad_s * sigma_rad_s;
+  return Correct<3>(measured - w_, H, R, options_.gate_chi2_3dof);
+}
+
+std::optional<Eigen::Vector2d> PoseEkf::ProjectPoint(const PinholeIntrinsics& k, const Eigen::Vector3d& point_in_world,
+                                                     Eigen::Matrix<double, 2, 12>* jacobian) const {
+  const Eigen::Vector3d rel = point_in_world - p_;
+  const Eigen::Vector3d c = q_.conjugate() * rel;
+  if (!(c.z() > kMinDepth_m) || !c.allFinite()) return std::nullopt;
+  const double iz = 1.0 / c.z();
+  const Eigen::Vector2d uv(k.fx * c.x() * iz + k.cx, k.fy * c.y() * iz + k.cy);
+  if (jacobian) {
+    Eigen::Matrix<double, 2, 3> dpi;
+    dpi << k.fx * iz, 0, -k.fx * c.x() * iz * iz, 0, k.fy * iz, -k.fy * c.y() * iz * iz;
+    const Eigen::Matrix3d Rt = q_.conjugate().toRotationMatrix();
+    jacobian->setZero();
+    jacobian->block<2, 3>(0, kPos) = -dpi * Rt;
+    // c = R^T Exp(-dtheta) rel  =>  dc/ddtheta = R^T [rel]x.
+    jacobian->block<2, 3>(0, kRot) = dpi * Rt * Skew(rel);
+  }
+  return uv;
+}
+
+UpdateResult PoseEkf::UpdatePoint(const PinholeIntrinsics& k, const Eigen::Vector3d& point_in_world, const Eigen::Vector2d& uv,
+                                  double extra_variance_px2) {
+  if (!uv.allFinite() || !point_in_world.allFinite() || !std::isfinite(extra_variance_px2)) return {Rejection::kNotFinite, 0};
+  Eigen::Matrix<double, 2, 12> H;
+  const std::optional<Eigen::Vector2d> predicted = ProjectPoint(k, point_in_world, &H);
+  if (!predicted) return {Rejection::kBehindCamera, 0};
+  const double var = options_.pixel_sigma_px * options_.pixel_sigma_px + std::max(0.0, extra_variance_px2);
+  return Correct<2>(uv - *predicted, H, Eigen::Matrix2d::Identity() * var, options_.gate_chi2_2dof);
+}
+
+std::optional<Eigen::Vector2d> PoseEkf::LineResidual(const PinholeIntrinsics& k, const Line3d& line, const Eigen::Vector2d& a,
+                                                     const Eigen::Vector2d& b, Eigen::Matrix<double, 2, 12>* jacobian) const {
+  const std::optional<Eigen::Vector2d> r = LineDistances(k, line, a, b, p_, q_);
+  if (!r || !jacobian) return r;
+  // Central differences over the six pose error components (position, world rotation vector):
+  // twelve line evaluations, far below a millisecond.
+  jacobian->setZero();
+  constexpr double kStep = 1e-6;
+  for (int i = 0; i < 6; ++i) {
+    Eigen::Vector3d dp = Eigen::Vector3d::Zero(), dth = Eigen::Vector3d::Zero();
+    (i < 3 ? dp : dth)(i % 3) = kStep;
+    const auto plus = LineDistances(k, line, a, b, p_ + dp, SO3Exp(dth) * q_);
+    const auto minus = LineDistances(k, line, a, b, p_ - dp, SO3Exp(-dth) * q_);
+    if (!plus || !minus) return std::nullopt;
+    jacobian->col(i < 3 ? kPos + i : kRot + i - 3) = (*plus - *minus) / (2 * kStep);
+  }
+  return r;
+}
+
+UpdateResult PoseEkf::UpdateLine(const PinholeIntrinsics& k, const Line3d& line, const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+  if (!a.allFinite() || !b.allFinite() || !line.point.allFinite() || !line.direction.allFinite() || line.direction.norm() < 1e-9) {
+    return {Rejection::kNotFinite, 0};
+  }
+  Eigen::Matrix<double, 2, 12> H;
+  const std::optional<Eigen::Vector2d> r = LineResidual(k, line, a, b, &H);
+  if (!r) return {Rejection::kBehindCamera, 0};
+  const double var = options_.pixel_sigma_px * options_.pixel_sigma_px;
+  return Correct<2>(-*r, H, Eigen::Matrix2d::Identity() * var, options_.gate_chi2_2dof);
+}
+
+Matrix6d PoseEkf::PoseCovariance() const {
+  Matrix6d c;
+  c.topLeftCorner<3, 3>() = P_.block<3, 3>(kPos, kPos);
+  c.topRightCorner<3, 3>() = P_.block<3, 3>(kPos, kRot);
+  c.bottomLeftCorner<3, 3>() = P_.block<3, 3>(kRot, kPos);
+  c.bottomRightCorner<3, 3>() = P_.block<3, 3>(kRot, kRot);
+  return c;
+}
+
+}  // namespace ave::pose

@@ -1,0 +1,125 @@
+#pragma once
+// The camera pose filter of AVE §5 / §5.1 (issue 5): an error-state EKF over position, velocity,
+// orientation and angular velocity of the camera (docs/POSE.md).
+//
+// Nominal state (local ENU frame of the site, metres; the caller subtracts the site origin so the
+// filter never sees ~1e6 m coordinates): position p, velocity v, orientation q = world_from_camera
+// rotation (Hamilton, unit), angular velocity w (world frame, rad/s).
+// Error state (12): [dp, dv, dtheta, dw]. Orientation is ERROR-STATE on the manifold: the true
+// rotation is Exp(dtheta) * q with dtheta a world-frame rotation vector, estimated in the filter and
+// folded into q after every update (then reset to zero with the reset Jacobian). The covariance's
+// orientation block is therefore in radians about the world axes, as the wire Pose expects.
+//
+// Process model: constant velocity and constant angular velocity driven by white acceleration /
+// angular acceleration noise. Measurement updates: GPS position, AHRS orientation, gyro rate, and
+// vision pixels (point features) and line distances (line features), each Mahalanobis-gated with a
+// reason; updates in Joseph form; covariance symmetrised and its diagonal floored.
+#include <cstdint>
+#include <optional>
+#include <string>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include "model_store/geometry/camera.h"
+#include "model_store/geometry/rigid3.h"
+
+namespace ave::pose {
+
+using Matrix12d = Eigen::Matrix<double, 12, 12>;
+using Vector12d = Eigen::Matrix<double, 12, 1>;
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+
+// Error-state block offsets.
+inline constexpr int kPos = 0, kVel = 3, kRot = 6, kRate = 9;
+
+struct PoseFilterOptions {
+  double accel_noise_m_s2 = 1.0;        // white acceleration PSD sqrt (m/s^2/sqrt(Hz)), walking
+  double angular_accel_noise_rad_s2 = 1.0;  // white angular acceleration (rad/s^2/sqrt(Hz))
+  double gps_min_sigma_m = 0.3;         // floor of the GPS sigma: multipath is not in the reported covariance
+  double orientation_sigma_deg = 2.0;   // AHRS orientation sigma (AVE §5: 1-3°)
+  double gyro_sigma_rad_s = 0.02;       // gyro rate sigma (noise + slowly varying bias)
+  double pixel_sigma_px = 1.5;          // vision point / line-distance sigma
+  double gate_chi2_3dof = 25.0;         // GPS / orientation gate (3 dof); chi2(3) p=1e-5 is 25.9
+  double gate_chi2_2dof = 16.0;         // vision gate per feature (2 dof); chi2(2) p=3e-4
+  double max_predict_s = 5.0;           // longer gaps are predicted in steps of this
+  double min_variance = 1e-12;          // covariance diagonal floor
+
+  std::string Check() const;  // empty when usable, else names the field
+};
+
+// Why a measurement did not change the state.
+enum class Rejection : uint8_t { kNone = 0, kNotFinite, kGate, kBehindCamera, kTimeNotIncreasing };
+const char* RejectionName(Rejection r);
+
+struct UpdateResult {
+  Rejection rejection = Rejection::kNone;
+  double mahalanobis_sq = 0;  // innovation' S^-1 innovation (0 when not computed)
+  bool accepted() const { return rejection == Rejection::kNone; }
+};
+
+// One 3D line of the static model: all points `point + s * direction` (local frame; direction
+// unit). An observed segment is any part of it (AVE §5.1).
+struct Line3d {
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();
+  Eigen::Vector3d direction = Eigen::Vector3d::UnitZ();
+};
+
+class PoseEkf {
+ public:
+  explicit PoseEkf(PoseFilterOptions options = {});
+
+  // Starts the filter at a pose with a diagonal 1-sigma: position (m), orientation (rad); velocity
+  // and rate start at zero with sigma 1 m/s and 0.5 rad/s.
+  void Initialize(int64_t t_ns, const Rigid3d& world_from_camera, double position_sigma_m, double orientation_sigma_rad);
+  bool initialized() const { return initialized_; }
+  int64_t time_ns() const { return t_ns_; }
+
+  // Moves the state to t_ns (constant-velocity model). Rejected (state unchanged) when t_ns is
+  // before the filter's time; dt = 0 is a no-op.
+  UpdateResult Predict(int64_t t_ns);
+
+  // Measurements at the filter's current time (call Predict first).
+  UpdateResult UpdatePosition(const Eigen::Vector3d& position_m, const Eigen::Matrix3d& covariance);
+  UpdateResult UpdateOrientation(const Eigen::Quaterniond& world_from_camera, double sigma_rad);
+  UpdateResult UpdateRate(const Eigen::Vector3d& rate_in_camera_rad_s, double sigma_rad_s);
+  // A known (or estimated) 3D point seen at pixel `uv`; `extra_variance_px2` adds the projected
+  // uncertainty of an estimated point.
+  UpdateResult UpdatePoint(const PinholeIntrinsics& k, const Eigen::Vector3d& point_in_world, const Eigen::Vector2d& uv,
+                           double extra_variance_px2 = 0);
+  // A 3D line seen as the image segment (a, b): residual = signed pixel distances of a and b from
+  // the projected infinite line.
+  UpdateResult UpdateLine(const PinholeIntrinsics& k, const Line3d& line, const Eigen::Vector2d& a, const Eigen::Vector2d& b);
+
+  Rigid3d world_from_camera() const { return Rigid3d(q_, p_); }
+  const Eigen::Vector3d& velocity() const { return v_; }
+  const Eigen::Vector3d& angular_velocity() const { return w_; }
+  const Matrix12d& covariance() const { return P_; }
+  // (position, rotation-vector error) block, row-major order of the wire Pose.
+  Matrix6d PoseCovariance() const;
+  const PoseFilterOptions& options() const { return options_; }
+
+  // Predicted pixel of a world point and its 2x12 Jacobian (exposed for tests); nullopt behind the camera.
+  std::optional<Eigen::Vector2d> ProjectPoint(const PinholeIntrinsics& k, const Eigen::Vector3d& point_in_world,
+                                              Eigen::Matrix<double, 2, 12>* jacobian = nullptr) const;
+  // Signed distances of a, b from the projected line (pixels); nullopt when the line does not
+  // project (behind the camera or through its centre).
+  std::optional<Eigen::Vector2d> LineResidual(const PinholeIntrinsics& k, const Line3d& line, const Eigen::Vector2d& a,
+                                              const Eigen::Vector2d& b, Eigen::Matrix<double, 2, 12>* jacobian = nullptr) const;
+
+ private:
+  template <int M>
+  UpdateResult Correct(const Eigen::Matrix<double, M, 1>& innovation, const Eigen::Matrix<double, M, 12>& H,
+                       const Eigen::Matrix<double, M, M>& R, double gate_chi2);
+  void Inject(const Vector12d& dx);
+  void Condition();
+
+  PoseFilterOptions options_;
+  bool initialized_ = false;
+  int64_t t_ns_ = 0;
+  Eigen::Vector3d p_ = Eigen::Vector3d::Zero(), v_ = Eigen::Vector3d::Zero(), w_ = Eigen::Vector3d::Zero();
+  Eigen::Quaterniond q_ = Eigen::Quaterniond::Identity();
+  Matrix12d P_ = Matrix12d::Identity();
+};
+
+}  // namespace ave::pose

@@ -1,0 +1,220 @@
+#include "sensor_agent/pose/pose_ekf.h"
+
+#include <cmath>
+#include <random>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "sensor_agent/pose/so3.h"
+
+namespace ave::pose {
+namespace {
+
+constexpr double kDeg = 3.14159265358979323846 / 180;
+
+PinholeIntrinsics Camera() {
+  PinholeIntrinsics k;
+  k.width = 640, k.height = 480, k.fx = 500, k.fy = 500, k.cx = 319.5, k.cy = 239.5;
+  return k;
+}
+
+bool IsSpd(const Matrix12d& P) {
+  if (P != P.transpose()) return false;  // exactly symmetric
+  Eigen::LLT<Matrix12d> llt(P);
+  return llt.info() == Eigen::Success;
+}
+
+// A filter on a camera at `pose` with the given 1-sigma.
+PoseEkf Filter(const Rigid3d& pose, double pos_sigma = 1.0, double rot_sigma = 5 * kDeg) {
+  PoseEkf ekf;
+  ekf.Initialize(0, pose, pos_sigma, rot_sigma);
+  return ekf;
+}
+
+TEST(So3, ExpLogRoundTripFromTinyAnglesToPi) {
+  for (double angle : {0.0, 1e-12, 1e-7, 1e-3, 0.5, 3.0, 3.14159, 3.14159265358979}) {
+    const Eigen::Vector3d w = angle * Eigen::Vector3d(1, -2, 0.5).normalized();
+    const Eigen::Quaterniond q = SO3Exp(w);
+    EXPECT_NEAR(q.norm(), 1.0, 1e-15);
+    const Eigen::Vector3d back = SO3Log(q);
+    EXPECT_TRUE(back.isApprox(w, 1e-9) || (angle > 3.14 && std::abs(back.norm() - angle) < 1e-9)) << angle << " " << back.transpose();
+    EXPECT_TRUE(back.allFinite());
+  }
+}
+
+TEST(PoseEkf, PointJacobianMatchesFiniteDifferences) {
+  PoseEkf ekf = Filter(Rigid3d(SO3Exp(Eigen::Vector3d(0.3, -1.2, 0.4)), Eigen::Vector3d(1, 2, 3)));
+  const Eigen::Vector3d point = ekf.world_from_camera() * Eigen::Vector3d(2, -1, 12);
+  Eigen::Matrix<double, 2, 12> J;
+  ASSERT_TRUE(ekf.ProjectPoint(Camera(), point, &J));
+  // Perturb the point the other way: moving the point by +e is moving the camera by -e.
+  for (int i = 0; i < 3; ++i) {
+    const double h = 1e-6;
+    Eigen::Vector3d e = Eigen::Vector3d::Zero();
+    e(i) = h;
+    const Eigen::Vector2d fd = (*ekf.ProjectPoint(Camera(), point - e) - *ekf.ProjectPoint(Camera(), point + e)) / (2 * h);
+    EXPECT_TRUE(J.col(kPos + i).isApprox(fd, 1e-5)) << J.col(kPos + i).transpose() << " vs " << fd.transpose();
+  }
+  // Rotation: rotating the camera by Exp(d) about the world equals rotating the point, about the
+  // camera centre, by Exp(-d).
+  const Eigen::Vector3d c = ekf.world_from_camera().translation;
+  for (int i = 0; i < 3; ++i) {
+    const double h = 1e-6;
+    Eigen::Vector3d d = Eigen::Vector3d::Zero();
+    d(i) = h;
+    const Eigen::Vector2d plus = *ekf.ProjectPoint(Camera(), c + SO3Exp(-d) * (point - c));
+    const Eigen::Vector2d minus = *ekf.ProjectPoint(Camera(), c + SO3Exp(d) * (point - c));
+    EXPECT_TRUE(J.col(kRot + i).isApprox((plus - minus) / (2 * h), 1e-5));
+  }
+}
+
+TEST(PoseEkf, PointUpdatesPullAPerturbedPoseToTheTruthEvenLookingStraightDownOrUp) {
+  for (const double look : {-1.0, 1.0}) {  // straight down, straight up
+    const Eigen::Vector3d eye(5, -3, 10);
+    const Rigid3d truth = LookAt(eye, eye + Eigen::Vector3d(0, 0, look));
+    PoseEkf ekf = Filter(Rigid3d(truth.rotation * SO3Exp(Eigen::Vector3d(0.02, -0.015, 0.03)), eye + Eigen::Vector3d(0.4, -0.3, 0.2)));
+    std::vector<Eigen::Vector3d> points;
+    for (int i = -2; i <= 2; ++i)
+      for (int j = -2; j <= 2; ++j) points.push_back(eye + Eigen::Vector3d(3.0 * i, 2.5 * j, look * (8 + (i + j) % 3)));
+    for (int round = 0; round < 5; ++round) {
+      for (const auto& p : points) {
+        const auto uv = ProjectToPixel(Camera(), truth.Inverse() * p);
+        ASSERT_TRUE(uv);
+        ekf.UpdatePoint(Camera(), p, *uv);
+      }
+    }
+    EXPECT_LT((ekf.world_from_camera().translation - truth.translation).norm(), 0.02) << look;
+    EXPECT_LT(AngleBetweenDeg(ekf.world_from_camera().rotation, truth.rotation), 0.05) << look;
+    EXPECT_TRUE(IsSpd(ekf.covariance()));
+  }
+}
+
+TEST(PoseEkf, LineUpdatesUseTheInfiniteLineAndItsJacobianIsConsistent) {
+  const Rigid3d truth = LookAt(Eigen::Vector3d(0, -20, 1.7), Eigen::Vector3d(0, 0, 5));
+  PoseEkf ekf = Filter(Rigid3d(truth.rotation * SO3Exp(Eigen::Vector3d(0.01, 0.02, -0.01)), truth.translation + Eigen::Vector3d(0.3, 0, 0)));
+  // Vertical and horizontal building edges; observed segments are arbitrary parts of them.
+  std::vector<Line3d> lines;
+  for (double x : {-6.0, -2.0, 3.0, 7.0}) lines.push_back({{x, 0, 0}, {0, 0, 1}});
+  for (double z : {2.0, 9.0}) lines.push_back({{0, 0, z}, {1, 0, 0}});
+  lines.push_back({{0, 5, 0}, {0, 1, 0}});  // going away from the camera
+  for (int round = 0; round < 6; ++round) {
+    for (const Line3d& l : lines) {
+      const auto a = ProjectToPixel(Camera(), truth.Inverse() * (l.point + (1.0 + round) * l.direction));
+      const auto b = ProjectToPixel(Camera(), truth.Inverse() * (l.point + (4.0 + round) * l.direction));
+      ASSERT_TRUE(a && b);
+      Eigen::Matrix<double, 2, 12> J;
+      const auto r = ekf.LineResidual(Camera(), l, *a, *b, &J);
+      ASSERT_TRUE(r);
+      EXPECT_TRUE(J.allFinite());
+      ekf.UpdateLine(Camera(), l, *a, *b);
+    }
+  }
+  // Lines alone fix the orientation and the position across the lines.
+  EXPECT_LT(AngleBetweenDeg(ekf.world_from_camera().rotation, truth.rotation), 0.05);
+  EXPECT_LT(std::abs(ekf.world_from_camera().translation.x() - truth.translation.x()), 0.02);
+}
+
+TEST(PoseEkf, FeaturesBehindTheCameraAreRejectedAndHorizonFeaturesAreHarmless) {
+  const Rigid3d truth = LookAt(Eigen::Vector3d(0, 0, 1.7), Eigen::Vector3d(0, 100, 1.7));
+  PoseEkf ekf = Filter(truth, 0.5, 1 * kDeg);
+  const Matrix12d before = ekf.covariance();
+  const Eigen::Vector3d behind(0, -10, 1.7);
+  EXPECT_EQ(ekf.UpdatePoint(Camera(), behind, {320, 240}).rejection, Rejection::kBehindCamera);
+  EXPECT_EQ(ekf.UpdateLine(Camera(), {{0, -10, 0}, {1, 0, 0}}, {0, 240}, {600, 240}).rejection, Rejection::kBehindCamera);
+  EXPECT_EQ(ekf.covariance(), before);
+  // A point on the horizon, 1e7 m away: position is unobservable from it, orientation is.
+  const Eigen::Vector3d horizon(1e5, 1e7, 1.7);
+  const auto uv = ProjectToPixel(Camera(), truth.Inverse() * horizon);
+  ASSERT_TRUE(uv);
+  Eigen::Matrix<double, 2, 12> J;
+  ASSERT_TRUE(ekf.ProjectPoint(Camera(), horizon, &J));
+  const double position_sensitivity = J.block<2, 3>(0, kPos).norm();
+  EXPECT_LT(position_sensitivity, 1e-3);
+  EXPECT_TRUE(ekf.UpdatePoint(Camera(), horizon, *uv + Eigen::Vector2d(0.5, 0)).accepted());
+  EXPECT_TRUE(ekf.world_from_camera().translation.isApprox(truth.translation, 1e-3));
+  EXPECT_TRUE(IsSpd(ekf.covariance()));
+  // Not finite inputs never touch the state.
+  EXPECT_EQ(ekf.UpdatePoint(Camera(), {NAN, 0, 0}, {1, 1}).rejection, Rejection::kNotFinite);
+  EXPECT_EQ(ekf.UpdatePosition({INFINITY, 0, 0}, Eigen::Matrix3d::Identity()).rejection, Rejection::kNotFinite);
+}
+
+TEST(PoseEkf, A50MetreGpsOutlierIsGatedWithItsDistance) {
+  PoseEkf ekf = Filter(Rigid3d(), 0.3, 1 * kDeg);
+  ekf.Predict(200'000'000);
+  const UpdateResult r = ekf.UpdatePosition(Eigen::Vector3d(50, 0, 0), Eigen::Matrix3d::Identity() * 0.05 * 0.05);
+  EXPECT_EQ(r.rejection, Rejection::kGate);
+  EXPECT_GT(r.mahalanobis_sq, 1000);
+  EXPECT_STREQ(RejectionName(r.rejection), "outside the Mahalanobis gate");
+  EXPECT_LT(ekf.world_from_camera().translation.norm(), 1e-9);
+  EXPECT_TRUE(ekf.UpdatePosition(Eigen::Vector3d(0.1, 0, 0), Eigen::Matrix3d::Identity() * 0.05 * 0.05).accepted());
+}
+
+TEST(PoseEkf, TimeMustNotGoBackwardsAndZeroDtIsANoOp) {
+  PoseEkf ekf = Filter(Rigid3d());
+  ASSERT_TRUE(ekf.Predict(1'000'000'000).accepted());
+  const Matrix12d P = ekf.covariance();
+  EXPECT_TRUE(ekf.Predict(1'000'000'000).accepted());  // dt = 0
+  EXPECT_EQ(ekf.covariance(), P);
+  EXPECT_EQ(ekf.Predict(999'999'999).rejection, Rejection::kTimeNotIncreasing);
+  EXPECT_EQ(ekf.time_ns(), 1'000'000'000);
+  EXPECT_EQ(ekf.covariance(), P);
+}
+
+TEST(PoseEkf, TracksARotationThroughAndNear180Degrees) {
+  // The camera spins about world up at 1 rad/s from 170° away from where the filter starts
+  // believing it is, with orientation measurements at 150 Hz.
+  const Eigen::Quaterniond start = SO3Exp(Eigen::Vector3d(0, 0, 170 * kDeg));
+  PoseEkf ekf;
+  ekf.Initialize(0, Rigid3d(), 0.1, 3.0);  // orientation sigma ~170°
+  for (int i = 1; i <= 600; ++i) {
+    const int64_t t = i * 1'000'000'000LL / 150;
+    ASSERT_TRUE(ekf.Predict(t).accepted());
+    const Eigen::Quaterniond truth = SO3Exp(Eigen::Vector3d(0, 0, 1.0 * t * 1e-9)) * start;
+    ekf.UpdateOrientation(truth, 1 * kDeg);
+    ASSERT_NEAR(ekf.world_from_camera().rotation.norm(), 1.0, 1e-12);
+    if (i > 300) {
+      EXPECT_LT(AngleBetweenDeg(ekf.world_from_camera().rotation, truth), 1.0) << i;
+    }
+  }
+  EXPECT_NEAR(ekf.angular_velocity().z(), 1.0, 0.05);
+  // A measurement 179.9° from the estimate is a finite innovation of about pi (gated, not NaN).
+  const UpdateResult r = ekf.UpdateOrientation(ekf.world_from_camera().rotation * SO3Exp(Eigen::Vector3d(179.9 * kDeg, 0, 0)), 1 * kDeg);
+  EXPECT_EQ(r.rejection, Rejection::kGate);
+  EXPECT_TRUE(std::isfinite(r.mahalanobis_sq));
+}
+
+TEST(PoseEkf, AMillionUpdatesKeepTheCovarianceSpdAndTheQuaternionUnit) {
+  PoseEkf ekf;
+  ekf.Initialize(0, Rigid3d(SO3Exp(Eigen::Vector3d(0.1, 0.2, 0.3)), Eigen::Vector3d::Zero()), 1, 0.1);
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> n(0, 1);
+  const Eigen::Matrix3d gps_cov = Eigen::Matrix3d::Identity() * 0.05 * 0.05;
+  int64_t t = 0;
+  for (int i = 0; i < 1'000'000; ++i) {
+    if (i % 10 == 0) ekf.Predict(t += 10'000'000);  // 100 Hz prediction, ten updates each
+    if (i % 2 == 0) {
+      ekf.UpdateOrientation(SO3Exp(Eigen::Vector3d(0.1, 0.2, 0.3) + 0.01 * Eigen::Vector3d(n(rng), n(rng), n(rng))), 0.01);
+    } else {
+      ekf.UpdatePosition(0.05 * Eigen::Vector3d(n(rng), n(rng), n(rng)), gps_cov);
+    }
+    if (i % 100'000 == 0) {
+      ASSERT_TRUE(IsSpd(ekf.covariance())) << i;
+      ASSERT_NEAR(ekf.world_from_camera().rotation.norm(), 1.0, 1e-12) << i;
+    }
+  }
+  EXPECT_TRUE(IsSpd(ekf.covariance()));
+  EXPECT_NEAR(ekf.world_from_camera().rotation.norm(), 1.0, 1e-12);
+  EXPECT_LT(ekf.world_from_camera().translation.norm(), 0.05);
+  EXPECT_GT(ekf.covariance().diagonal().minCoeff(), 0);
+}
+
+TEST(PoseFilterOptions, CheckNamesTheBadField) {
+  PoseFilterOptions o;
+  EXPECT_EQ(o.Check(), "");
+  o.pixel_sigma_px = -1;
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("pixel_sigma_px"));
+}
+
+}  // namespace
+}  // namespace ave::pose

@@ -1,0 +1,162 @@
+#include "sensor_agent/pose/pose_inputs.h"
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "sensor_agent/pose/so3.h"
+#include "sensor_agent/sim/gps_imu.h"
+#include "sensor_agent/sim/scenario.h"
+
+namespace ave::pose {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+constexpr int64_t kSecond = 1'000'000'000;
+
+// A walker on a gentle curve (1.4 m/s), looking along the path.
+Rigid3d Walk(double t) {
+  const Eigen::Vector3d p(1.4 * t, 2.0 * std::sin(0.05 * t), 1.7);
+  const double heading = std::atan2(0.1 * std::cos(0.05 * t), 1.4);
+  // Camera x right, y down, z forward: forward = heading in the ground plane.
+  const Eigen::Vector3d forward(std::cos(heading), std::sin(heading), 0);
+  return LookAt(p, p + forward);
+}
+
+// GPS at 5 Hz (5 cm noise, reported) with no fix in [dropout_from, dropout_to), orientation at 150 Hz (0.5° noise).
+SensorLog WalkLog(double seconds, double dropout_from = 1e9, double dropout_to = 1e9) {
+  std::mt19937_64 rng(11);
+  std::normal_distribution<double> n(0, 1);
+  SensorLog log;
+  for (int64_t t = 0; t <= static_cast<int64_t>(seconds * kSecond); t += kSecond / 5) {
+    GpsReading g;
+    g.t_ns = t;
+    const double ts = t * 1e-9;
+    g.valid = !(ts >= dropout_from && ts < dropout_to);
+    g.position_m = Walk(ts).translation + 0.05 * Eigen::Vector3d(n(rng), n(rng), n(rng));
+    g.covariance = Eigen::Matrix3d::Identity() * 0.05 * 0.05;
+    log.gps.push_back(g);
+  }
+  for (int64_t k = 0; k * kSecond / 150 <= static_cast<int64_t>(seconds * kSecond); ++k) {
+    ImuReading s;
+    s.t_ns = k * kSecond / 150;
+    s.orientation = Walk(s.t_ns * 1e-9).rotation * SO3Exp(0.5 * 3.14159265358979323846 / 180 * Eigen::Vector3d(n(rng), n(rng), n(rng)));
+    log.imu.push_back(s);
+  }
+  return log;
+}
+
+TEST(PoseTracker, A30SecondGpsDropoutStaysBoundedAndTheCovarianceGrowsThenShrinks) {
+  PoseTracker tracker(WalkLog(50, 5, 35));
+  double worst_m = 0, cov_before = 0, cov_end_of_gap = 0, cov_after = 0, error_after = 0;
+  for (int64_t f = 0; f <= 50 * 30; ++f) {
+    const int64_t t = f * kSecond / 30;
+    const PoseSample s = tracker.Advance(t);
+    ASSERT_TRUE(s.valid);
+    ASSERT_EQ(s.t_ns, t);
+    const double error = (s.world_from_camera.translation - Walk(t * 1e-9).translation).norm();
+    worst_m = std::max(worst_m, error);
+    const double trace = s.covariance.topLeftCorner<3, 3>().trace();
+    if (f == 4 * 30) cov_before = trace;
+    if (f == 35 * 30 - 1) cov_end_of_gap = trace;
+    if (f == 45 * 30) cov_after = trace, error_after = error;
+  }
+  EXPECT_LT(worst_m, 5.0);
+  EXPECT_GT(cov_end_of_gap, 20 * cov_before);
+  EXPECT_LT(cov_after, cov_end_of_gap / 20);
+  EXPECT_LT(error_after, 0.3);
+  EXPECT_EQ(tracker.stats().gps_dropouts, 150);
+}
+
+TEST(PoseTracker, RejectsRepeatedAndBackwardsTimeStampsAndGatesA50MetreOutlier) {
+  SensorLog log = WalkLog(6);
+  log.gps.insert(log.gps.begin() + 10, log.gps[9]);  // repeated time stamp (dt = 0)
+  ImuReading back = log.imu[200];
+  back.t_ns -= kSecond / 10;  // time going backwards
+  log.imu.insert(log.imu.begin() + 201, back);
+  log.gps[20].position_m.x() += 50;  // a 50 m outlier
+  PoseTracker tracker(std::move(log));
+  double worst_m = 0;
+  for (int64_t f = 0; f <= 6 * 30; ++f) {
+    const PoseSample s = tracker.Advance(f * kSecond / 30);
+    worst_m = std::max(worst_m, (s.world_from_camera.translation - Walk(f / 30.0).translation).norm());
+  }
+  EXPECT_EQ(tracker.stats().time_rejected, 2);
+  EXPECT_EQ(tracker.stats().gps_gated, 1);
+  EXPECT_LT(worst_m, 0.5);
+  // Asking for an earlier time changes nothing and is counted.
+  const PoseSample now = tracker.Current();
+  const PoseSample earlier = tracker.Advance(kSecond);
+  EXPECT_EQ(earlier.t_ns, now.t_ns);
+  EXPECT_EQ(tracker.stats().time_rejected, 3);
+}
+
+TEST(PoseTracker, NoPoseUntilTheFirstFixAndOrientation) {
+  SensorLog log = WalkLog(2);
+  log.gps.erase(log.gps.begin(), log.gps.begin() + 3);  // first fix at 0.6 s
+  PoseTracker tracker(std::move(log));
+  EXPECT_FALSE(tracker.Advance(kSecond / 2).valid);
+  EXPECT_TRUE(tracker.Advance(kSecond).valid);
+}
+
+// The simulator's campus backpack streams, written at world coordinates near 1e6 m and read back.
+TEST(SensorLog, ReadsTheSimulatorLogAtWorldCoordinatesNear1e6Metres) {
+  auto scenario = sim::LoadScenario("campus");
+  ASSERT_TRUE(scenario.ok()) << scenario.status();
+  sim::GpsImuSpec spec;
+  spec.camera_id = "backpack";
+  spec.duration_s = 3;
+  const auto streams = sim::SimulateGpsImu(scenario->world, *scenario->world.FindCamera("backpack"), spec, scenario->effects, scenario->seed);
+  ASSERT_GT(streams.origin.y(), 1e6);
+  const fs::path dir = fs::temp_directory_path() / "ave_pose_log_test";
+  ASSERT_TRUE(sim::WriteGpsImu(streams, dir.string()).ok());
+  const auto log = ReadSensorLog(dir.string(), streams.origin);
+  ASSERT_TRUE(log.ok()) << log.status();
+  const SensorLog direct = FromSimulation(streams);
+  ASSERT_EQ(log->gps.size(), direct.gps.size());
+  ASSERT_EQ(log->imu.size(), direct.imu.size());
+  for (size_t i = 0; i < direct.gps.size(); ++i) {
+    EXPECT_EQ(log->gps[i].valid, direct.gps[i].valid);
+    if (direct.gps[i].valid) {
+      EXPECT_LT((log->gps[i].position_m - direct.gps[i].position_m).norm(), 1e-8);
+    }
+  }
+  for (size_t i = 0; i < direct.imu.size(); i += 50) EXPECT_LT(AngleBetweenDeg(log->imu[i].orientation, direct.imu[i].orientation), 1e-9);
+  // The filter on it, resampled to 30 Hz, stays near the truth (GPS drops out at 2 s).
+  PoseTracker tracker(*log);
+  for (const auto& [t_ns, truth] : streams.truth_at_video_rate) {
+    const PoseSample s = tracker.Advance(t_ns);
+    ASSERT_TRUE(s.valid);
+    EXPECT_LT((s.world_from_camera.translation - truth.translation).norm(), 3.0) << t_ns;
+    EXPECT_LT(AngleBetweenDeg(s.world_from_camera.rotation, truth.rotation), 10.0) << t_ns;
+  }
+  // Bad input names the file, line and column.
+  {
+    std::ofstream(dir / "gps.csv", std::ios::app) << "123,1,abc,0,0,0,0,0,0,0,0,0,0,0\n";
+  }
+  const auto bad = ReadSensorLog(dir.string(), streams.origin);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_THAT(bad.status().message(), HasSubstr("gps.csv:" + std::to_string(streams.gps.size() + 2) + ": column x_m: not a number 'abc'"));
+  {
+    std::ofstream(dir / "gps.csv") << "t_ns,valid,x_m\n";
+  }
+  EXPECT_THAT(ReadSensorLog(dir.string(), streams.origin).status().message(), HasSubstr("gps.csv:1: header lacks column y_m"));
+  fs::remove_all(dir);
+  EXPECT_THAT(ReadSensorLog(dir.string(), streams.origin).status().message(), HasSubstr("cannot open"));
+}
+
+TEST(PoseMode, ParsesTheThreeModes) {
+  EXPECT_EQ(ParsePoseMode("truth"), PoseMode::kTruth);
+  EXPECT_EQ(ParsePoseMode("gps-imu"), PoseMode::kGpsImu);
+  EXPECT_EQ(ParsePoseMode("gps-imu-vision"), PoseMode::kGpsImuVision);
+  EXPECT_FALSE(ParsePoseMode("vision"));
+}
+
+}  // namespace
+}  // namespace ave::pose

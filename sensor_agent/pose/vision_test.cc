@@ -1,0 +1,148 @@
+#include "sensor_agent/pose/vision.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "sensor_agent/pose/so3.h"
+#include "sensor_agent/sim/camera_effects.h"
+#include "sensor_agent/sim/scenario.h"
+
+namespace ave::pose {
+namespace {
+
+constexpr double kDeg = 3.14159265358979323846 / 180;
+
+double MedianMisregistration(const PinholeIntrinsics& k, const Rigid3d& truth, const Rigid3d& estimate, const std::vector<Eigen::Vector3d>& points) {
+  std::vector<double> e;
+  for (const auto& p : points) {
+    const auto a = ProjectToPixel(k, truth.Inverse() * p), b = ProjectToPixel(k, estimate.Inverse() * p);
+    e.push_back(a && b ? (*a - *b).norm() : 1e9);
+  }
+  std::sort(e.begin(), e.end());
+  return e.empty() ? 1e9 : e[e.size() / 2];
+}
+
+class VisionTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    auto s = sim::LoadScenario("campus");
+    ASSERT_TRUE(s.ok()) << s.status();
+    scenario_ = new sim::Scenario(std::move(*s));
+  }
+  static void TearDownTestSuite() { delete scenario_; }
+  static sim::Scenario* scenario_;
+};
+sim::Scenario* VisionTest::scenario_ = nullptr;
+
+TEST_F(VisionTest, CampusFeatureMapHasCornersAndEdgesOfRectangularParts) {
+  const FeatureMap map = CampusFeatureMap(scenario_->world);
+  int rectangular = 0;
+  for (const auto& b : scenario_->world.buildings)
+    for (const auto& part : b.Parts()) rectangular += part.kind != scene::PrimitiveKind::kCylinder && part.kind != scene::PrimitiveKind::kDome;
+  EXPECT_EQ(map.points.size(), 8u * rectangular);
+  EXPECT_EQ(map.lines.size(), 8u * rectangular);
+  for (const auto& l : map.lines) EXPECT_NEAR(l.line.direction.norm(), 1.0, 1e-12);
+}
+
+TEST_F(VisionTest, StabilisesAPerturbedBackpackPoseToAFewPixels) {
+  const scene::CameraSpec& camera = *scenario_->world.FindCamera("backpack");
+  const sim::SimulatedCamera sim_camera(scenario_->world, camera, scenario_->EffectsForCamera("backpack"), scenario_->seed);
+  const double t = 4.0;
+  const sim::SimImage frame = sim_camera.Frame(120, t);
+  const Rigid3d truth = sim_camera.PoseAt(t);
+  VisionTracker vision(CampusFeatureMap(scenario_->world), scene::BuildStaticMesh(scenario_->world, 2.0), camera.intrinsics);
+  const std::vector<Eigen::Vector3d> visible = vision.VisiblePoints(truth);
+  ASSERT_GE(visible.size(), 6u);
+  PoseEkf ekf;
+  const Rigid3d start(SO3Exp(Eigen::Vector3d(0.5 * kDeg, -0.8 * kDeg, 1.5 * kDeg)) * truth.rotation, truth.translation + Eigen::Vector3d(0.4, -0.3, 0.1));
+  ekf.Initialize(0, start, 0.5, 2 * kDeg);
+  const double before = MedianMisregistration(camera.intrinsics, truth, start, visible);
+  EXPECT_GT(before, 10);
+  VisionFrameStats stats = vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
+  EXPECT_GE(stats.points_used + stats.lines_used, 6);
+  EXPECT_EQ(stats.points_predicted, static_cast<int>(vision.VisiblePoints(start).size()));
+  const double after = MedianMisregistration(camera.intrinsics, truth, ekf.world_from_camera(), visible);
+  if (const char* dir = std::getenv("AVE_POSE_PNG_DIR")) {  // true (green), start (red), corrected (blue)
+    cv::Mat image;
+    cv::resize(cv::Mat(frame.height, frame.width, CV_8UC3, const_cast<uint8_t*>(frame.bgr.data())), image, {}, 3, 3, cv::INTER_NEAREST);
+    for (int v = 1; v < frame.height; ++v)
+      for (int u = 1; u < frame.width; ++u)
+        if (frame.object_id[frame.Index(u, v)] != frame.object_id[frame.Index(u - 1, v)] || frame.object_id[frame.Index(u, v)] != frame.object_id[frame.Index(u, v - 1)])
+          cv::rectangle(image, cv::Rect(3 * u, 3 * v, 3, 3), cv::Scalar(0, 255, 255), cv::FILLED);
+    for (const auto& p : visible) {
+      const std::pair<Rigid3d, cv::Scalar> poses[] = {{truth, {0, 255, 0}}, {start, {0, 0, 255}}, {ekf.world_from_camera(), {255, 0, 0}}};
+      for (const auto& [pose, colour] : poses) {
+        if (const auto uv = ProjectToPixel(camera.intrinsics, pose.Inverse() * p)) cv::circle(image, cv::Point2d(3 * uv->x() + 1, 3 * uv->y() + 1), 6, colour, 1);
+      }
+    }
+    cv::imwrite(std::string(dir) + "/pose_vision_test.png", image(cv::Rect(0, 0, 1920, 720)));
+  }
+  EXPECT_LT(after, 2.0) << "before " << before << " px; used " << stats.points_used << " points, " << stats.lines_used << " lines";
+  // A frame of the wrong size is ignored.
+  const Rigid3d pose = ekf.world_from_camera();
+  stats = vision.Update(frame.bgr.data(), frame.width / 2, frame.height, ekf);
+  EXPECT_EQ(stats.features_used(), 0);
+  EXPECT_TRUE(ekf.world_from_camera().translation.isApprox(pose.translation));
+}
+
+TEST(VisionOptions, CheckNamesTheBadField) {
+  VisionOptions o;
+  EXPECT_EQ(o.Check(), "");
+  o.max_features = -1;
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("max_features"));
+}
+
+}  // namespace
+}  // namespace ave::pose
+
+namespace ave::pose {
+namespace {
+
+// The feature map is the geometry the simulator renders: just below each visible eaves corner
+// (ideal camera) lies its building, just above it something else.
+TEST_F(VisionTest, EavesCornersSitOnTheRenderedBuildingCorners) {
+  for (const bool distorted : {false, true}) {
+  scene::CameraSpec camera = *scenario_->world.FindCamera("backpack");
+  if (!distorted) camera.intrinsics.distortion = {};
+  const sim::SimulatedCamera sim_camera(scenario_->world, camera, {}, scenario_->seed);
+  const double t = 1.0;
+  const sim::SimImage frame = sim_camera.Frame(30, t);
+  const Rigid3d truth = sim_camera.PoseAt(t);
+  const FeatureMap map = CampusFeatureMap(scenario_->world);
+  VisionTracker vision(map, scene::BuildStaticMesh(scenario_->world, 2.0), camera.intrinsics);
+  int checked = 0, below_is_building = 0;
+  for (const Eigen::Vector3d& p : vision.VisiblePoints(truth)) {
+    auto uv = ProjectToPixel(camera.intrinsics, truth.Inverse() * p);
+    if (distorted) {  // where the lens puts it (OpenCV's model)
+      const Eigen::Vector3d c = truth.Inverse() * p;
+      std::vector<cv::Point2d> out;
+      const cv::Matx33d K(camera.intrinsics.fx, 0, camera.intrinsics.cx, 0, camera.intrinsics.fy, camera.intrinsics.cy, 0, 0, 1);
+      cv::projectPoints(std::vector<cv::Point3d>{{c.x(), c.y(), c.z()}}, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), K,
+                        std::vector<double>(camera.intrinsics.distortion.begin(), camera.intrinsics.distortion.end()), out);
+      uv = Eigen::Vector2d(out[0].x, out[0].y);
+    }
+    const int u = static_cast<int>(std::lround(uv->x())), v = static_cast<int>(std::lround(uv->y()));
+    if (v < 4 || v + 4 >= frame.height) continue;
+    bool eaves = false;
+    for (size_t i = 1; i < map.points.size(); i += 2) eaves |= map.points[i] == p;
+    if (!eaves) continue;
+    ++checked;
+    const uint32_t below = frame.object_id[frame.Index(u, v + 3)];
+    below_is_building += sim::IsBuildingId(below);
+  }
+  EXPECT_GT(checked, 3);
+  EXPECT_GE(below_is_building * 10, checked * 8);
+  }
+}
+
+}  // namespace
+}  // namespace ave::pose
