@@ -1,6 +1,5 @@
-// ave-viewer: the control-room viewer. A window when DISPLAY is set, or --headless to render once
-// to a PNG. Window keys: drag to orbit, wheel to zoom, WASD/QE to move, 1-9 highlight a camera,
-// 0 clear, f frustums, p snapshot, Esc quit.
+// ave-viewer: the control-room viewer. A window when DISPLAY is set, or --headless to render
+// offscreen (EGL) to a PNG / a PNG sequence / an OpenEXR depth image. Keys: see kKeys below.
 #include <cstdlib>
 #include <iostream>
 #include <sstream>
@@ -8,33 +7,62 @@
 #include "model_store/common/cli.h"
 #include "viewer_client/client/viewer_app.h"
 
+namespace {
+
+constexpr char kKeys[] = R"(
+Window controls (browse view, top left):
+  W/S A/D E/Q   fly forward/back, left/right, up/down (Shift: 4x faster)
+  right drag    mouse look (turn the view about the eye)
+  left drag     orbit about the pivot (default: the --target point)
+  middle click  or 'o': pick the pivot under the cursor (orbit about that point)
+  wheel         move towards / away from the pivot
+  left click    on a camera's marker in any view: select it (highlighted in every view)
+  1-9 / 0       select camera N of the list / clear the selection
+  f  frustums   k  paths   l  labels   t  age tint   h  panel
+  p             write --snapshot now;  Esc: quit
+The panel (top left) lists the cameras with status (live / stale / lost) and a time line of
+frames received; its 1 2 3 buttons lock a camera to the top-right, bottom-left, bottom-right view.
+)";
+
+}  // namespace
+
 int main(int argc, char** argv) {
   ave::viewer::ViewerOptions options;
   if (const char* t = std::getenv("AVE_VIEWER_TOKEN")) options.token = t;
   if (const char* ca = std::getenv("AVE_TLS_CA")) options.tls_ca = ca;
   std::string eye, target, size = "1280x720";
+  std::vector<std::string> servers;
   CLI::App app{"ave-viewer: AVE control-room viewer (quad view: browse + three camera-locked views)"};
-  app.add_option("--server", options.server, "fusion server host:port")->capture_default_str();
+  app.footer(kKeys);
+  app.add_option("--server", servers,
+                 "fusion server host:port; repeat to subscribe to several (cameras merged; default 127.0.0.1:50051)");
   app.add_option("--token", options.token, "viewer bearer token (env AVE_VIEWER_TOKEN)");
   app.add_option("--tls-ca", options.tls_ca, "PEM CA of the server certificate: use TLS (env AVE_TLS_CA)");
   app.add_option("--tls-cert", options.tls_cert, "PEM client certificate (mutual TLS)");
   app.add_option("--tls-key", options.tls_key, "PEM client key (mutual TLS)");
   app.add_option("--tls-server-name", options.tls_server_name, "name the server certificate carries, if not the host dialled");
   app.add_option("--id", options.viewer_id, "this viewer's name in the server log")->capture_default_str();
-  app.add_flag("--headless", options.headless, "render offscreen (EGL) once and exit");
-  app.add_option("--snapshot", options.snapshot_path, "PNG to write (headless: required)");
+  app.add_flag("--headless", options.headless, "render offscreen (EGL) and exit");
+  app.add_option("--snapshot", options.snapshot_path, "PNG to write (headless: at the end; window: on 'p' and at close)");
+  app.add_option("--depth", options.depth_path, "OpenEXR of the browse view's linear depth in metres (with the snapshot)");
+  app.add_option("--record", options.record_dir, "write every frame drawn as DIR/frame_NNNNNN.png");
   app.add_option("--size", size, "framebuffer WIDTHxHEIGHT")->capture_default_str();
   app.add_option("--layout", options.layout, "quad or browse")->capture_default_str();
   app.add_option("--lock", options.locked_cameras, "camera ids for the three locked views")->expected(0, 3);
   app.add_option("--cameras", options.camera_filter, "subscribe to these camera ids only");
+  app.add_option("--select", options.selected_camera, "camera highlighted in every view from the start");
   app.add_option("--wait-cameras", options.wait_cameras, "headless: cameras with a frame before rendering (0 = 3)");
   app.add_option("--timeout", options.timeout_s, "headless: seconds to wait for frames")->capture_default_str();
   app.add_option("--max-rate", options.max_rate_hz, "updates per second to ask for")->capture_default_str();
   app.add_option("--eye", eye, "browse view eye x,y,z (m, site frame)");
-  app.add_option("--target", target, "browse view target x,y,z");
-  app.add_option("--frames", options.max_frames, "window: close after N frames (0 = when closed)");
+  app.add_option("--target", target, "browse view target x,y,z (the first orbit pivot)");
+  app.add_option("--frames", options.max_frames, "window: close after N frames (0 = when closed); headless: draw N frames");
   app.add_flag("!--no-frustums", options.draw_frustums, "do not draw camera frustums");
+  app.add_flag("!--no-panel", options.panel, "no on-screen panel or labels");
+  app.add_flag("!--no-select", options.select_data,
+               "ask for every camera's frames (default: only cameras whose frustum meets a view)");
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-viewer")) return *exit_code;
+  if (!servers.empty()) options.servers = servers;
   if (!eye.empty() && !ave::cli::ParseVec3(eye, options.eye)) {
     std::cerr << "ave-viewer: --eye must be x,y,z\n";
     return 2;

@@ -1,5 +1,7 @@
 #include "viewer_client/client/scene_client.h"
 
+#include <limits>
+
 #include <grpcpp/grpcpp.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -8,6 +10,7 @@
 #include "absl/strings/str_cat.h"
 #include "ave/v1/ave.grpc.pb.h"
 #include "fusion_server/core/convert.h"
+#include "fusion_server/core/view_select.h"
 #include "model_store/common/log.h"
 
 namespace ave::viewer {
@@ -22,7 +25,34 @@ CameraLiveness FromProto(v1::CameraStatus s) {
   }
 }
 
+// The views' corners (each frustum clamped at depth_m), for comparing view sets.
+std::vector<std::vector<Eigen::Vector3d>> Corners(const SelectionViews& views, double depth_m) {
+  std::vector<std::vector<Eigen::Vector3d>> out;
+  for (const Eigen::Matrix4d& m : views.clip_from_local) {
+    absl::StatusOr<ConvexVolume> v = FrustumFromClip(m, depth_m, -std::numeric_limits<double>::infinity());
+    out.push_back(v.ok() ? v->vertices : std::vector<Eigen::Vector3d>{});
+  }
+  return out;
+}
+
+constexpr int kTimelineFrames = 64;  // frame times kept per camera for the time line
+
 }  // namespace
+
+bool ViewsDifferALot(const SelectionViews& a, const SelectionViews& b, double fraction, double depth_m) {
+  if (a.clip_from_local.size() != b.clip_from_local.size()) return true;
+  const auto ca = Corners(a, depth_m), cb = Corners(b, depth_m);
+  for (size_t i = 0; i < ca.size(); ++i) {
+    if (ca[i].size() != cb[i].size() || ca[i].empty()) return ca[i].size() != cb[i].size();
+    double size = 0, moved = 0;
+    for (size_t k = 0; k < ca[i].size(); ++k) {
+      size = std::max(size, (ca[i][k] - ca[i][0]).norm());
+      moved = std::max(moved, (ca[i][k] - cb[i][k]).norm());
+    }
+    if (moved > fraction * size) return true;
+  }
+  return false;
+}
 
 SceneClient::SceneClient(std::shared_ptr<grpc::Channel> channel, std::string viewer_token, std::string viewer_id)
     : channel_(std::move(channel)), token_(std::move(viewer_token)), viewer_id_(std::move(viewer_id)) {}
@@ -58,6 +88,10 @@ absl::StatusOr<TriangleMesh> SceneClient::FetchStaticModel(uint64_t* version) {
       mesh.indices.push_back(base + i);
     }
     mesh.origin = {chunk.origin().x(), chunk.origin().y(), chunk.origin().z()};
+    {
+      std::lock_guard lock(mu_);
+      model_origin_ = mesh.origin;
+    }
     if (version) *version = chunk.version();
     count = chunk.chunk_count();
     ++expected;
@@ -76,6 +110,7 @@ absl::StatusOr<TriangleMesh> SceneClient::FetchStaticModel(uint64_t* version) {
 void SceneClient::Start(const SubscribeOptions& options) {
   Stop();
   stop_ = false;
+  reselect_interval_ = options.reselect_interval;
   thread_ = std::thread([this, options] { Loop(options); });
 }
 
@@ -93,6 +128,31 @@ std::vector<CameraView> SceneClient::Snapshot() const {
   std::vector<CameraView> out;
   for (const auto& [id, cam] : cameras_) out.push_back(cam);
   return out;
+}
+
+std::vector<ObjectView> SceneClient::Objects() const {
+  std::lock_guard lock(mu_);
+  return objects_;
+}
+
+void SceneClient::SetViews(const SelectionViews& views) {
+  std::lock_guard lock(mu_);
+  wanted_views_ = views;
+  if (!context_ || resubscribe_) return;  // not subscribed yet: the next Subscribe takes them
+  if (std::chrono::steady_clock::now() - last_subscribe_ < reselect_interval_) return;
+  if (!ViewsDifferALot(views, subscribed_views_)) return;
+  resubscribe_ = true;
+  static_cast<grpc::ClientContext*>(context_.get())->TryCancel();
+}
+
+SelectionViews SceneClient::subscribed_views() const {
+  std::lock_guard lock(mu_);
+  return subscribed_views_;
+}
+
+Eigen::Vector3d SceneClient::model_origin() const {
+  std::lock_guard lock(mu_);
+  return model_origin_;
 }
 
 std::string SceneClient::last_error() const {
@@ -117,15 +177,28 @@ void SceneClient::Loop(SubscribeOptions options) {
   while (!stop_.load()) {
     auto context = std::make_shared<grpc::ClientContext>();
     context->AddMetadata("authorization", "Bearer " + token_);
-    {
-      std::lock_guard lock(mu_);
-      context_ = context;
-    }
     v1::SubscribeRequest request;
     request.set_viewer_id(viewer_id_);
     for (const auto& id : options.camera_ids) request.add_camera_ids(id);
     request.set_max_rate_hz(options.max_rate_hz);
     request.set_include_jpeg(options.include_jpeg);
+    request.set_max_jpeg_width(options.max_jpeg_width);
+    {
+      std::lock_guard lock(mu_);
+      context_ = context;
+      resubscribe_ = false;
+      subscribed_views_ = wanted_views_;
+      last_subscribe_ = std::chrono::steady_clock::now();
+      const Eigen::Vector3d origin = subscribed_views_.origin.value_or(model_origin_);
+      for (const Eigen::Matrix4d& m : subscribed_views_.clip_from_local) {
+        v1::ViewFrustum* f = request.add_views();
+        for (int k = 0; k < 16; ++k) f->add_view_projection(static_cast<float>(m(k % 4, k / 4)));
+        f->set_origin_x(origin.x());
+        f->set_origin_y(origin.y());
+        f->set_origin_z(origin.z());
+      }
+    }
+    ++subscriptions_;
     auto reader = stub->Subscribe(context.get(), request);
     v1::SceneUpdate update;
     while (reader->Read(&update)) {
@@ -170,7 +243,25 @@ void SceneClient::Loop(SubscribeOptions options) {
           if (auto it = decoded.find(cam.camera_id()); it != decoded.end()) {
             v.image = it->second;
             v.image_serial = next_serial_++;
+            ++v.jpegs_received;
+            v.jpeg_bytes_received += cam.jpeg().size();
+            jpeg_bytes_ += cam.jpeg().size();
+            v.recent_frame_times_ns.push_back(update.server_time_ns());
+            if (v.recent_frame_times_ns.size() > kTimelineFrames) v.recent_frame_times_ns.erase(v.recent_frame_times_ns.begin());
           }
+        }
+        objects_.clear();
+        for (const auto& o : update.objects()) {
+          ObjectView ov;
+          ov.id = o.object_id();
+          ov.position = {o.position().x(), o.position().y(), o.position().z()};
+          ov.size = {o.size().x(), o.size().y(), o.size().z()};
+          ov.heading_rad = o.heading_rad();
+          ov.model = o.model();
+          ov.kind = o.kind();
+          ov.source_camera_id = o.source_camera_id();
+          for (const auto& p : o.path()) ov.path.emplace_back(p.x(), p.y(), p.z());
+          objects_.push_back(std::move(ov));
         }
       }
       ++updates_;
@@ -183,6 +274,12 @@ void SceneClient::Loop(SubscribeOptions options) {
       last_error_ = status.error_message();
     }
     if (stop_.load()) break;
+    bool reselect = false;
+    {
+      std::lock_guard lock(mu_);
+      reselect = resubscribe_;
+    }
+    if (reselect) continue;  // cancelled by SetViews: subscribe again at once with the new views
     if (status.error_code() == grpc::StatusCode::UNAUTHENTICATED ||
         status.error_code() == grpc::StatusCode::PERMISSION_DENIED) {
       AVE_LOG(ERROR) << "viewer '" << viewer_id_ << "': refused: " << status.error_message();

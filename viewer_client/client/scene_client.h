@@ -2,13 +2,16 @@
 // The viewer's link to the fusion server: fetches the static model once and keeps a subscription
 // to the projection-ready scene state, decoding each camera's newest JPEG as it arrives.
 // Reconnects with backoff if the server goes away.
+#include <array>
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -45,12 +48,44 @@ struct CameraView {
   uint64_t frame_sequence = 0;
   std::shared_ptr<const DecodedImage> image;  // newest decoded frame, may be null
   uint64_t image_serial = 0;                  // changes whenever `image` does
+  uint64_t jpegs_received = 0;                // frames received for this camera (data selection counts)
+  uint64_t jpeg_bytes_received = 0;
+  std::vector<int64_t> recent_frame_times_ns;  // capture times of the last frames received (time line)
+  int server_index = 0;                        // which --server it came from
 };
+
+// A moving object the server tracks (proto DynamicObject), in the static model's local frame.
+struct ObjectView {
+  uint64_t id = 0;
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();  // ground contact
+  Eigen::Vector3d size = Eigen::Vector3d::Zero();      // width, length, height (m)
+  double heading_rad = 0;
+  int model = 0;  // proto ObjectModel
+  uint32_t kind = 0;
+  std::vector<Eigen::Vector3d> path;  // oldest first
+  std::string source_camera_id;
+};
+
+// Data selection (issue 7): the frusta of the viewer's views, GL clip from the model's local frame.
+struct SelectionViews {
+  std::vector<Eigen::Matrix4d> clip_from_local;
+  // World coordinates of the local frame's zero. Unset: the static model this client fetched (or
+  // the server's own local frame before any fetch). A viewer of several servers draws in the
+  // first one's frame and says so here.
+  std::optional<Eigen::Vector3d> origin;
+};
+
+// Whether two sets of view frusta differ enough to ask the server again: a different count, or a
+// frustum corner (clamped at `depth_m`) that moved by more than `fraction` of its frustum's size.
+bool ViewsDifferALot(const SelectionViews& a, const SelectionViews& b, double fraction = 0.1, double depth_m = 300);
 
 struct SubscribeOptions {
   std::vector<std::string> camera_ids;  // empty = all
   float max_rate_hz = 30;
   bool include_jpeg = true;
+  uint32_t max_jpeg_width = 0;  // hint to the server, 0 = any
+  // Data selection: re-subscribe with new views at most this often (SetViews).
+  std::chrono::milliseconds reselect_interval{500};
 };
 
 class SceneClient {
@@ -66,7 +101,22 @@ class SceneClient {
   void Stop();
 
   std::vector<CameraView> Snapshot() const;
+  std::vector<ObjectView> Objects() const;
   uint64_t updates_received() const { return updates_.load(); }
+  uint64_t jpeg_bytes_received() const { return jpeg_bytes_.load(); }
+  uint64_t subscriptions() const { return subscriptions_.load(); }  // Subscribe calls made (re-subscribes count)
+
+  // Data selection: the views the viewer draws now, in the local frame of the static model (its
+  // origin goes with them once FetchStaticModel ran; before, the server's own local frame). The
+  // first call before Start() sets the initial subscription's views (none: every camera's
+  // frames). Later calls re-subscribe when the views
+  // differ a lot from the subscribed ones and reselect_interval has passed since the last
+  // subscription; call every frame, a change held back by the rate limit goes out on a later call.
+  void SetViews(const SelectionViews& views);
+  // The views the current subscription carries.
+  SelectionViews subscribed_views() const;
+  // The origin of the static model fetched (the local frame the views are in).
+  Eigen::Vector3d model_origin() const;
   std::string last_error() const;
 
   // Waits until `ready(snapshot)` holds or the timeout passes; returns whether it held.
@@ -81,6 +131,14 @@ class SceneClient {
   mutable std::mutex mu_;
   std::condition_variable changed_;
   std::map<std::string, CameraView> cameras_;
+  std::vector<ObjectView> objects_;
+  SelectionViews wanted_views_, subscribed_views_;
+  std::chrono::steady_clock::time_point last_subscribe_{};
+  bool resubscribe_ = false;  // the current subscription was cancelled to change views
+  Eigen::Vector3d model_origin_ = Eigen::Vector3d::Zero();
+  std::chrono::milliseconds reselect_interval_{500};
+  std::atomic<uint64_t> jpeg_bytes_{0};
+  std::atomic<uint64_t> subscriptions_{0};
   std::string last_error_;
   std::atomic<uint64_t> updates_{0};
   std::atomic<bool> stop_{false};

@@ -2,6 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+#include <set>
 #include <thread>
 
 #include <grpcpp/grpcpp.h>
@@ -12,7 +16,10 @@
 #include "ave/net/tls.h"
 #include "absl/strings/str_cat.h"
 #include "model_store/common/log.h"
+#include "model_store/geometry/bvh.h"
 #include "model_store/geometry/camera.h"
+#include "viewer_client/client/browse_camera.h"
+#include "viewer_client/client/overlay.h"
 #include "viewer_client/render/gl_context.h"
 
 namespace ave::viewer {
@@ -22,34 +29,20 @@ namespace {
 const Eigen::Vector3f kPalette[] = {{1.0f, 0.85f, 0.1f}, {0.1f, 0.9f, 1.0f}, {1.0f, 0.3f, 0.8f},
                                     {0.4f, 1.0f, 0.3f},  {1.0f, 0.5f, 0.1f}, {0.6f, 0.5f, 1.0f}};
 
-// Orbit camera for the window: yaw/pitch/distance around a target.
-struct Orbit {
-  Eigen::Vector3d target;
-  double yaw = 0, pitch = 0, distance = 100;
-
-  static Orbit From(const Eigen::Vector3d& eye, const Eigen::Vector3d& target) {
-    Orbit o;
-    o.target = target;
-    const Eigen::Vector3d d = eye - target;
-    o.distance = std::max(1.0, d.norm());
-    o.yaw = std::atan2(d.y(), d.x());
-    o.pitch = std::asin(std::clamp(d.z() / o.distance, -1.0, 1.0));
-    return o;
-  }
-  Eigen::Vector3d Eye() const {
-    return target + distance * Eigen::Vector3d(std::cos(pitch) * std::cos(yaw), std::cos(pitch) * std::sin(yaw),
-                                               std::sin(pitch));
-  }
-};
 
 }  // namespace
 
 std::string ViewerOptions::Check() const {
-  if (server.empty()) return "server is empty";
+  if (servers.empty()) return "no server given";
+  for (const auto& s : servers)
+    if (s.empty()) return "a server address is empty";
   if (width < 64 || height < 64 || width > 8192 || height > 8192) return "size must be 64..8192 pixels per side";
   if (layout != "quad" && layout != "browse") return "layout must be 'quad' or 'browse'";
   if (locked_cameras.size() > 3) return "at most 3 locked cameras";
-  if (headless && snapshot_path.empty()) return "headless needs a snapshot path";
+  if (headless && snapshot_path.empty() && record_dir.empty() && depth_path.empty()) {
+    return "headless needs --snapshot, --record or --depth";
+  }
+  if (!depth_path.empty() && !headless && snapshot_path.empty()) return "--depth needs --headless or --snapshot";
   if (!(timeout_s > 0)) return "timeout must be > 0";
   if (!(max_rate_hz > 0)) return "max rate must be > 0";
   if (!eye.allFinite() || !target.allFinite() || (eye - target).norm() < 1e-6) return "eye and target must differ";
@@ -69,6 +62,7 @@ std::vector<Projector> MakeProjectors(const std::vector<CameraView>& cameras) {
     p.near_m = cam.near_m;
     p.far_m = cam.far_m;
     p.position = cam.world_from_camera.translation;
+    p.distortion = cam.intrinsics.distortion;
     if (cam.image) {
       p.image_width = cam.image->width;
       p.image_height = cam.image->height;
@@ -115,6 +109,12 @@ std::vector<View> QuadViews(int width, int height, const View& browse, const std
   return views;
 }
 
+SelectionViews SelectionOf(const std::vector<View>& views) {
+  SelectionViews out;
+  for (const View& v : views) out.clip_from_local.push_back(v.projection * v.view);
+  return out;
+}
+
 absl::Status WritePng(const std::string& path, const std::vector<uint8_t>& rgba, int width, int height) {
   if (rgba.size() != size_t(width) * height * 4) return absl::InvalidArgumentError("WritePng: size mismatch");
   const cv::Mat in(height, width, CV_8UC4, const_cast<uint8_t*>(rgba.data()));
@@ -128,8 +128,308 @@ absl::Status WritePng(const std::string& path, const std::vector<uint8_t>& rgba,
   return absl::OkStatus();
 }
 
+
+namespace {
+
+// Proto ObjectModel numbers (ave.proto) to the renderer's shapes; people default to billboards.
+DynamicModel ToModel(const ObjectView& o) {
+  DynamicModel m;
+  m.base = o.position;
+  m.heading_rad = o.heading_rad;
+  // ObjectView.size is width, length, height; the renderer wants length, width, height.
+  const Eigen::Vector3d size(o.size.y(), o.size.x(), o.size.z());
+  if (size.allFinite() && size.minCoeff() > 0) m.size = size;
+  m.shape = o.model == 1 ? ModelShape::kBillboard : o.model == 3 ? ModelShape::kCylinder : ModelShape::kCuboid;
+  m.color = o.kind == 2 ? Eigen::Vector3f(0.25f, 0.4f, 0.85f) : Eigen::Vector3f(0.85f, 0.25f, 0.2f);
+  return m;
+}
+
+bool SameDisplay(const DisplayOptions& a, const DisplayOptions& b) {
+  return a.overlap == b.overlap && a.seam_feather == b.seam_feather &&
+         a.retention_half_life_s == b.retention_half_life_s && a.tint_by_age == b.tint_by_age && a.sky == b.sky;
+}
+
+// One run of the viewer: the servers' clients, the renderer, the overlay and what the user set.
+class Session {
+ public:
+  Session(const ViewerOptions& options, GlContext& context, Renderer& renderer, Overlay* overlay)
+      : options_(options), context_(context), renderer_(renderer), overlay_(overlay),
+        browse_(options.eye, options.target) {
+    state_.frustums = options.draw_frustums;
+    state_.select_data = options.select_data;
+    state_.selected_camera = options.selected_camera;
+    state_.display = renderer.options().display;
+    for (size_t i = 0; i < options.locked_cameras.size() && i < 3; ++i) state_.locked[i] = options.locked_cameras[i];
+    browse_.set_speed(20);
+  }
+
+  absl::Status Connect() {
+    for (size_t i = 0; i < options_.servers.size(); ++i) {
+      absl::StatusOr<std::shared_ptr<grpc::Channel>> made = net::MakeChannel(
+          options_.servers[i], {.ca_file = options_.tls_ca, .cert_file = options_.tls_cert,
+                                .key_file = options_.tls_key, .server_name = options_.tls_server_name});
+      if (!made.ok()) return absl::InvalidArgumentError("viewer: " + std::string(made.status().message()));
+      clients_.push_back(std::make_unique<SceneClient>(*made, options_.token, options_.viewer_id));
+    }
+    uint64_t model_version = 0;
+    absl::StatusOr<TriangleMesh> mesh = clients_[0]->FetchStaticModel(&model_version);
+    if (!mesh.ok()) return absl::Status(mesh.status().code(), absl::StrCat(options_.servers[0], ": ", mesh.status().message()));
+    AVE_LOG(INFO) << "viewer: static model version " << model_version << ", " << mesh->TriangleCount() << " triangles";
+    for (size_t i = 1; i < clients_.size(); ++i) {  // the others' origins, so views travel in their frames
+      if (absl::StatusOr<TriangleMesh> other = clients_[i]->FetchStaticModel(); !other.ok()) {
+        AVE_LOG(WARNING) << "viewer: " << options_.servers[i] << ": no static model (" << other.status().message()
+                         << "); its cameras are shown in the first server's frame";
+      }
+    }
+    if (absl::Status s = renderer_.SetStaticMesh(*mesh); !s.ok()) return s;
+    mesh_ = *std::move(mesh);
+    // The first subscription already carries the browse view, so a viewer never receives every
+    // camera's frames just because it has not drawn yet.
+    const int w = context_.framebuffer_width(), h = context_.framebuffer_height();
+    const std::vector<View> first = ComputeViews({}, w, h);
+    UpdateSelection(first);
+    for (auto& c : clients_) {
+      c->Start({.camera_ids = options_.camera_filter, .max_rate_hz = options_.max_rate_hz, .include_jpeg = true});
+    }
+    return absl::OkStatus();
+  }
+
+  void Stop() {
+    for (auto& c : clients_) c->Stop();
+  }
+
+  // Every server's cameras, merged by id, in the first server's local frame (another server's
+  // model may sit at another origin). A camera several servers know comes from the one with the
+  // newest frame (the first server on a tie).
+  std::vector<CameraView> Cameras() const {
+    std::vector<CameraView> out;
+    std::map<std::string, size_t> index;
+    for (size_t i = 0; i < clients_.size(); ++i) {
+      const Eigen::Vector3d origin = clients_[i]->model_origin();
+      const Eigen::Vector3d shift = i == 0 || origin.isZero(0) ? Eigen::Vector3d::Zero() : Eigen::Vector3d(origin - mesh_.origin);
+      for (CameraView& cam : clients_[i]->Snapshot()) {
+        cam.server_index = static_cast<int>(i);
+        if (!shift.isZero(0)) {
+          cam.world_from_camera.translation += shift;
+          cam.view = GlViewFromWorld(cam.world_from_camera);
+        }
+        auto [it, fresh] = index.try_emplace(cam.id, out.size());
+        if (fresh) {
+          out.push_back(std::move(cam));
+        } else if (cam.image && (!out[it->second].image || cam.frame_capture_time_ns > out[it->second].frame_capture_time_ns)) {
+          out[it->second] = std::move(cam);
+        }
+      }
+    }
+    std::sort(out.begin(), out.end(), [](const CameraView& a, const CameraView& b) { return a.id < b.id; });
+    return out;
+  }
+
+  std::vector<View> ComputeViews(const std::vector<CameraView>& cams, int w, int h) {
+    if (options_.locked_cameras.empty() && !auto_locked_ && cams.size() > 0) {
+      for (size_t i = 0; i < cams.size() && i < 3; ++i) state_.locked[i] = cams[i].id;  // the first by id
+      auto_locked_ = true;
+    }
+    projectors_ = MakeProjectors(cams);
+    View browse = BrowseView({0, 0, w, h}, browse_.eye(), browse_.Target(), options_.browse_fov_deg);
+    std::vector<View> views =
+        options_.layout == "quad"
+            ? QuadViews(w, h, browse, projectors_, std::vector<std::string>(state_.locked.begin(), state_.locked.end()))
+            : std::vector<View>{browse};
+    for (size_t i = 0; i < views.size(); ++i) {
+      View& v = views[i];
+      v.draw_frustums = state_.frustums;
+      v.draw_paths = state_.paths;
+      if (!state_.selected_camera.empty() || i == 0) v.highlight_camera_id = state_.selected_camera;
+    }
+    return views;
+  }
+
+  // Tells every server which views to select cameras by (rate-limited inside SceneClient).
+  void UpdateSelection(const std::vector<View>& views) {
+    SelectionViews selection;
+    if (state_.select_data) selection = SelectionOf(views);
+    selection.origin = mesh_.origin;  // every server gets the views in the first server's frame
+    for (auto& c : clients_) c->SetViews(selection);
+  }
+
+  // Draws one frame into the context's framebuffer; returns the views drawn.
+  absl::StatusOr<std::vector<View>> Draw(const WindowInput* input) {
+    const auto now = std::chrono::steady_clock::now();
+    const double dt = std::chrono::duration<double>(now - last_frame_).count();
+    last_frame_ = now;
+    const std::vector<CameraView> cams = Cameras();
+    const int w = context_.framebuffer_width(), h = context_.framebuffer_height();
+    std::vector<View> views = ComputeViews(cams, w, h);
+    // The renderer keeps its own copies; `cams` holds the images alive across SetProjectors.
+    if (absl::Status s = renderer_.SetProjectors(projectors_); !s.ok()) return s;
+    // A camera whose last pose had NaNs keeps its last good pose in the renderer: list it as stale.
+    std::vector<CameraView> listed = cams;
+    for (const std::string& id : renderer_.StaleCameras()) {
+      for (CameraView& c : listed)
+        if (c.id == id) c.status = CameraLiveness::kStale;
+    }
+    std::vector<ObjectView> objects;
+    for (auto& c : clients_) {
+      std::vector<ObjectView> o = c->Objects();
+      objects.insert(objects.end(), o.begin(), o.end());
+    }
+    std::vector<DynamicModel> models;
+    std::vector<Polyline> paths;
+    for (const ObjectView& o : objects) {
+      models.push_back(ToModel(o));
+      if (o.path.size() > 1) paths.push_back({o.path, Eigen::Vector3f(1.0f, 0.5f, 0.15f)});
+    }
+    if (absl::Status s = renderer_.SetDynamicModels(models); !s.ok()) return s;
+    if (absl::Status s = renderer_.SetPaths(paths); !s.ok()) return s;
+    if (!applied_display_ || !SameDisplay(*applied_display_, state_.display)) {
+      if (absl::Status s = renderer_.SetDisplayOptions(state_.display); !s.ok()) return s;
+      applied_display_ = state_.display;
+    }
+    context_.BindFramebuffer();
+    if (absl::Status s = renderer_.Render(views, w, h); !s.ok()) return s;
+    if (overlay_ != nullptr) {
+      const OverlayStats stats = Stats(cams, dt);
+      int64_t now_ns = 0;
+      for (const CameraView& c : cams)
+        if (!c.recent_frame_times_ns.empty()) now_ns = std::max(now_ns, c.recent_frame_times_ns.back());
+      now_ns = std::max(now_ns, latest_server_ns_);
+      latest_server_ns_ = now_ns;
+      const int builds = frames_ == 0 ? 2 : 1;  // the first frame twice: auto-sized windows get their size
+      for (int b = 0; b < builds; ++b) {
+        overlay_->BeginFrame(w, h, input, dt);
+        if (state_.panel) overlay_->Panel(listed, stats, now_ns, state_);
+        for (const View& v : views) overlay_->Annotate(v, h, listed, objects, state_);
+        if (b + 1 < builds) overlay_->DiscardFrame();
+      }
+      context_.BindFramebuffer();
+      overlay_->EndFrame();
+    }
+    UpdateSelection(views);
+    ++frames_;
+    return views;
+  }
+
+  // Window input to the browse camera and the selection (skipped where the panel has the mouse).
+  void HandleInput(const WindowInput& in, const std::vector<View>& last_views) {
+    const bool panel_mouse = overlay_ != nullptr && overlay_->WantsMouse();
+    const int h = context_.framebuffer_height();
+    BrowseMotion m;
+    m.forward = double(in.forward) - double(in.back);
+    m.right = double(in.right) - double(in.left);
+    m.up = double(in.up) - double(in.down);
+    m.fast = in.fast;
+    m.dt_s = 1.0 / 30;
+    if (!panel_mouse) {
+      m.orbit_px = in.left_drag_px;
+      m.look_px = in.right_drag_px;
+      m.wheel = in.scroll;
+      if (in.left_presses > 0 && !last_views.empty()) {
+        for (const View& v : last_views) {
+          const Viewport& vp = v.viewport;
+          const double y_up = h - in.cursor_px.y();
+          if (in.cursor_px.x() < vp.x || in.cursor_px.x() >= vp.x + vp.width || y_up < vp.y || y_up >= vp.y + vp.height) continue;
+          const std::string picked = PickCamera(v, h, Cameras(), in.cursor_px);
+          if (!picked.empty()) state_.selected_camera = picked;
+        }
+      }
+      if ((in.middle_presses > 0 || in.typed.find('o') != std::string::npos) && !last_views.empty()) PickPivot(last_views[0], in.cursor_px);
+    }
+    browse_.Apply(m);
+    const std::vector<CameraView> cams = Cameras();
+    for (char c : in.typed) {
+      if (c == 'f') state_.frustums = !state_.frustums;
+      if (c == 'l') state_.annotations = !state_.annotations;
+      if (c == 'h') state_.panel = !state_.panel;
+      if (c == 't') state_.display.tint_by_age = !state_.display.tint_by_age;
+      if (c == 'k') state_.paths = !state_.paths;
+      if (c >= '1' && c <= '9' && size_t(c - '1') < cams.size()) state_.selected_camera = cams[c - '1'].id;
+      if (c == '0') state_.selected_camera.clear();
+    }
+  }
+
+  int frames() const { return frames_; }
+  SceneClient& client(size_t i) { return *clients_[i]; }
+
+ private:
+  OverlayStats Stats(const std::vector<CameraView>& cams, double dt) {
+    OverlayStats s;
+    if (dt > 0 && frames_ > 0) fps_ = fps_ == 0 ? 1 / dt : 0.9 * fps_ + 0.1 / dt;  // frame 0's dt is start-up
+    s.fps = fps_;
+    const auto now = std::chrono::steady_clock::now();
+    for (const CameraView& c : cams) {
+      auto& [count, when] = last_jpegs_[c.id];
+      if (c.jpegs_received != count) {
+        count = c.jpegs_received;
+        when = now;
+      }
+      s.cameras_receiving += c.jpegs_received > 0 && now - when < std::chrono::seconds(2);
+    }
+    uint64_t bytes = 0;
+    for (auto& c : clients_) {
+      bytes += c->jpeg_bytes_received();
+      s.subscriptions += c->subscriptions();
+    }
+    const double since = std::chrono::duration<double>(now - bytes_at_).count();
+    if (since >= 1) {
+      bytes_per_s_ = (bytes - bytes_then_) / since;
+      bytes_then_ = bytes;
+      bytes_at_ = now;
+    }
+    s.jpeg_bytes_per_s = bytes_per_s_;
+    s.servers = static_cast<int>(clients_.size());
+    return s;
+  }
+
+  void PickPivot(const View& browse, const Eigen::Vector2d& cursor_px) {
+    if (!bvh_) bvh_ = std::make_unique<MeshBvh>(mesh_);
+    const auto [origin, dir] = PixelRayOfView(browse, context_.framebuffer_height(), cursor_px);
+    if (const auto hit = bvh_->Raycast(origin, dir)) browse_.SetPivot(origin + hit->distance_m * dir);
+  }
+
+  const ViewerOptions& options_;
+  GlContext& context_;
+  Renderer& renderer_;
+  Overlay* overlay_;
+  BrowseCamera browse_;
+  OverlayState state_;
+  bool auto_locked_ = false;
+  std::optional<DisplayOptions> applied_display_;
+  std::vector<std::unique_ptr<SceneClient>> clients_;
+  std::vector<Projector> projectors_;
+  TriangleMesh mesh_;
+  std::unique_ptr<MeshBvh> bvh_;
+  std::chrono::steady_clock::time_point last_frame_ = std::chrono::steady_clock::now();
+  std::chrono::steady_clock::time_point bytes_at_ = std::chrono::steady_clock::now();
+  uint64_t bytes_then_ = 0;
+  double bytes_per_s_ = 0, fps_ = 0;
+  int64_t latest_server_ns_ = 0;
+  std::map<std::string, std::pair<uint64_t, std::chrono::steady_clock::time_point>> last_jpegs_;
+  int frames_ = 0;
+};
+
+// Writes the framebuffer to `path` as PNG.
+absl::Status SaveFramebuffer(GlContext& context, const std::string& path) {
+  auto pixels = context.ReadPixels();
+  if (!pixels.ok()) return pixels.status();
+  return WritePng(path, *pixels, context.framebuffer_width(), context.framebuffer_height());
+}
+
+std::string RecordPath(const std::string& dir, int frame) {
+  char name[32];
+  std::snprintf(name, sizeof name, "frame_%06d.png", frame);
+  return (std::filesystem::path(dir) / name).string();
+}
+
+}  // namespace
+
 absl::Status RunViewer(const ViewerOptions& options) {
   if (const std::string why = options.Check(); !why.empty()) return absl::InvalidArgumentError("viewer: " + why);
+  if (!options.record_dir.empty()) {
+    std::error_code ec;
+    std::filesystem::create_directories(options.record_dir, ec);
+    if (ec) return absl::UnavailableError("viewer: --record " + options.record_dir + ": " + ec.message());
+  }
   std::unique_ptr<GlContext> context;
   WindowContext* window = nullptr;
   if (options.headless) {
@@ -138,7 +438,7 @@ absl::Status RunViewer(const ViewerOptions& options) {
     context = std::move(*c);
   } else {
     WindowOptions wo;
-    wo.title = "AVE — " + options.server;
+    wo.title = "AVE — " + options.servers[0];
     wo.width = options.width;
     wo.height = options.height;
     auto c = CreateWindowContext(wo);
@@ -150,110 +450,100 @@ absl::Status RunViewer(const ViewerOptions& options) {
   AVE_LOG(INFO) << "viewer: " << context->Description();
   auto renderer = Renderer::Create();
   if (!renderer.ok()) return renderer.status();
-
-  absl::StatusOr<std::shared_ptr<grpc::Channel>> made = net::MakeChannel(
-      options.server, {.ca_file = options.tls_ca, .cert_file = options.tls_cert, .key_file = options.tls_key,
-                       .server_name = options.tls_server_name});
-  if (!made.ok()) return absl::InvalidArgumentError("viewer: " + std::string(made.status().message()));
-  std::shared_ptr<grpc::Channel> channel = *made;
-  SceneClient client(channel, options.token, options.viewer_id);
-  uint64_t model_version = 0;
-  absl::StatusOr<TriangleMesh> mesh = client.FetchStaticModel(&model_version);
-  if (!mesh.ok()) return mesh.status();
-  AVE_LOG(INFO) << "viewer: static model version " << model_version << ", " << mesh->TriangleCount() << " triangles";
-  if (absl::Status s = (*renderer)->SetStaticMesh(*mesh); !s.ok()) return s;
-  client.Start({.camera_ids = options.camera_filter, .max_rate_hz = options.max_rate_hz, .include_jpeg = true});
-
-  auto locked_for = [&](const std::vector<CameraView>& cams) {
-    std::vector<std::string> ids = options.locked_cameras;
-    for (const auto& c : cams) {
-      if (ids.size() >= 3) break;
-      if (options.locked_cameras.empty()) ids.push_back(c.id);
+  std::unique_ptr<Overlay> overlay;
+  if (options.panel) {
+    auto o = Overlay::Create();
+    if (o.ok()) {
+      overlay = *std::move(o);
+    } else {  // the views still work without the panel
+      AVE_LOG(WARNING) << "viewer: no on-screen panel: " << o.status().message();
     }
-    return ids;
-  };
-  Orbit orbit = Orbit::From(options.eye, options.target);
-  bool frustums = options.draw_frustums;
-  std::string highlight;
+  }
+  Session session(options, *context, **renderer, overlay.get());
+  if (absl::Status s = session.Connect(); !s.ok()) return s;
 
-  auto render_once = [&](const std::vector<CameraView>& cams) -> absl::Status {
-    const std::vector<Projector> projectors = MakeProjectors(cams);
-    if (absl::Status s = (*renderer)->SetProjectors(projectors); !s.ok()) return s;
-    const int w = context->framebuffer_width(), h = context->framebuffer_height();
-    View browse = BrowseView({0, 0, w, h}, orbit.Eye(), orbit.target, options.browse_fov_deg);
-    browse.draw_frustums = frustums;
-    browse.highlight_camera_id = highlight;
-    std::vector<View> views =
-        options.layout == "quad" ? QuadViews(w, h, browse, projectors, locked_for(cams)) : std::vector<View>{browse};
-    context->BindFramebuffer();
-    return (*renderer)->Render(views, w, h);
+  int recorded = 0;
+  auto after_frame = [&]() -> absl::Status {
+    if (options.record_dir.empty()) return absl::OkStatus();
+    return SaveFramebuffer(*context, RecordPath(options.record_dir, recorded++));
   };
-  auto snapshot = [&]() -> absl::Status {
-    auto pixels = context->ReadPixels();
-    if (!pixels.ok()) return pixels.status();
-    if (absl::Status s = WritePng(options.snapshot_path, *pixels, context->framebuffer_width(),
-                                  context->framebuffer_height());
-        !s.ok()) {
-      return s;
-    }
-    AVE_LOG(INFO) << "viewer: wrote " << options.snapshot_path;
-    return absl::OkStatus();
-  };
-
   absl::Status result = absl::OkStatus();
   if (options.headless) {
-    // By default: every subscribed camera, or three, whichever is fewer (at least one).
-    auto wanted = [&](const std::vector<CameraView>& cams) {
-      return options.wait_cameras > 0 ? options.wait_cameras : std::max(1, std::min<int>(3, cams.size()));
-    };
+    // Wait for frames, re-sending the views as the cameras (and so the locked views) become known.
     auto with_frames = [](const std::vector<CameraView>& cams) {
       return static_cast<int>(std::count_if(cams.begin(), cams.end(), [](const CameraView& c) { return c.image != nullptr; }));
     };
-    const bool ready = client.WaitUntil([&](const std::vector<CameraView>& cams) { return with_frames(cams) >= wanted(cams); },
-                                        std::chrono::milliseconds(static_cast<int64_t>(options.timeout_s * 1000)));
-    const std::vector<CameraView> cams = client.Snapshot();
-    const int want = wanted(cams);
-    if (!ready) {
-      std::string missing;
-      for (const auto& c : cams)
-        if (!c.image) missing += " " + c.id;
-      result = absl::DeadlineExceededError(absl::StrCat("viewer: only ", with_frames(cams), " of ", want,
-                                                        " cameras delivered a frame within ", options.timeout_s,
-                                                        " s (no frame from:", missing.empty() ? " -" : missing, ")"));
+    auto wanted = [&](const std::vector<CameraView>& cams) {
+      return options.wait_cameras > 0 ? options.wait_cameras : std::max(1, std::min<int>(3, cams.size()));
+    };
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(int64_t(options.timeout_s * 1000));
+    std::vector<CameraView> cams;
+    while (true) {
+      cams = session.Cameras();
+      session.UpdateSelection(session.ComputeViews(cams, context->framebuffer_width(), context->framebuffer_height()));
+      if (!cams.empty() && with_frames(cams) >= wanted(cams)) break;
+      if (std::chrono::steady_clock::now() >= deadline) {
+        std::string missing;
+        for (const auto& c : cams)
+          if (!c.image) missing += " " + c.id;
+        result = absl::DeadlineExceededError(absl::StrCat("viewer: only ", with_frames(cams), " of ", wanted(cams),
+                                                          " cameras delivered a frame within ", options.timeout_s,
+                                                          " s (no frame from:", missing.empty() ? " -" : missing, ")"));
+        break;
+      }
+      session.client(0).WaitUntil([](const std::vector<CameraView>&) { return false; }, std::chrono::milliseconds(100));
     }
-    if (absl::Status s = render_once(cams); !s.ok()) return s;
-    if (absl::Status s = snapshot(); !s.ok()) return s;
+    const int frames = std::max(1, options.max_frames);
+    std::vector<View> views;
+    double draw_s = 0;  // frames after the first (which compiles shaders and renders every shadow map)
+    for (int f = 0; f < frames; ++f) {
+      const auto frame_start = std::chrono::steady_clock::now();
+      absl::StatusOr<std::vector<View>> drawn = session.Draw(nullptr);
+      if (!drawn.ok()) return drawn.status();
+      views = *std::move(drawn);
+      (void)context->ReadPixels();  // waits for the GPU, so the time is the frame's
+      if (f > 0) draw_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - frame_start).count();
+      if (absl::Status s = after_frame(); !s.ok()) return s;
+      if (f + 1 < frames) std::this_thread::sleep_until(frame_start + std::chrono::microseconds(int64_t(1e6 / options.max_rate_hz)));
+    }
+    if (frames > 1) {
+      AVE_LOG(INFO) << "viewer: " << frames - 1 << " frames after the first in " << draw_s << " s ("
+                    << 1e3 * draw_s / (frames - 1) << " ms per frame, read-back included); renderer: "
+                    << (*renderer)->stats().shadow_map_renders << " shadow-map renders, "
+                    << (*renderer)->stats().dynamic_shadow_updates << " dynamic shadow updates, "
+                    << (*renderer)->stats().video_uploads << " video uploads";
+    }
+    if (!options.snapshot_path.empty()) {
+      if (absl::Status s = SaveFramebuffer(*context, options.snapshot_path); !s.ok()) return s;
+      AVE_LOG(INFO) << "viewer: wrote " << options.snapshot_path;
+    }
+    if (!options.depth_path.empty()) {
+      absl::StatusOr<std::vector<float>> depth = (*renderer)->ReadLinearDepth(views[0]);
+      if (!depth.ok()) return depth.status();
+      if (absl::Status s = WriteDepthExr(options.depth_path, *depth, views[0].viewport.width, views[0].viewport.height); !s.ok()) return s;
+      AVE_LOG(INFO) << "viewer: wrote " << options.depth_path << " (browse view depth, metres)";
+    }
   } else {
-    int frames = 0;
-    while (!window->ShouldClose() && (options.max_frames == 0 || frames < options.max_frames)) {
-      ++frames;
+    std::vector<View> views;
+    while (!window->ShouldClose() && (options.max_frames == 0 || session.frames() < options.max_frames)) {
       window->PollEvents();
       const WindowInput in = window->TakeInput();
-      orbit.yaw -= 0.005 * in.left_drag_px.x();
-      orbit.pitch = std::clamp(orbit.pitch + 0.005 * in.left_drag_px.y(), 0.05, 1.55);
-      orbit.distance = std::clamp(orbit.distance * std::pow(0.9, in.scroll), 5.0, 2000.0);
-      const double step = (in.fast ? 4.0 : 1.0) * 0.01 * orbit.distance;
-      const Eigen::Vector3d fwd(-std::cos(orbit.yaw), -std::sin(orbit.yaw), 0), side(-fwd.y(), fwd.x(), 0);
-      orbit.target += step * ((in.forward - in.back) * fwd + (in.left - in.right) * side +
-                              (in.up - in.down) * Eigen::Vector3d::UnitZ());
       if (in.escape_pressed) window->RequestClose();
-      const std::vector<CameraView> cams = client.Snapshot();
-      for (char c : in.typed) {
-        if (c == 'f') frustums = !frustums;
-        if (c >= '1' && c <= '9' && size_t(c - '1') < cams.size()) highlight = cams[c - '1'].id;
-        if (c == '0') highlight.clear();
+      session.HandleInput(in, views);
+      absl::StatusOr<std::vector<View>> drawn = session.Draw(&in);
+      if (!drawn.ok()) return drawn.status();
+      views = *std::move(drawn);
+      if (absl::Status s = after_frame(); !s.ok()) return s;
+      if (in.typed.find('p') != std::string::npos && !options.snapshot_path.empty()) {
+        if (SaveFramebuffer(*context, options.snapshot_path).ok()) AVE_LOG(INFO) << "viewer: wrote " << options.snapshot_path;
       }
-      if (absl::Status s = render_once(cams); !s.ok()) return s;
-      bool save = false;
-      for (char c : in.typed) save |= c == 'p';
-      if (save && !options.snapshot_path.empty()) (void)snapshot();
       window->SwapBuffers();
     }
     if (!options.snapshot_path.empty()) {
-      if (absl::Status s = render_once(client.Snapshot()); s.ok()) (void)snapshot();
+      if (session.Draw(nullptr).ok()) (void)SaveFramebuffer(*context, options.snapshot_path);
     }
   }
-  client.Stop();
+  session.Stop();
   return result;
 }
 

@@ -14,15 +14,19 @@
 namespace ave::viewer {
 
 struct ViewerOptions {
-  std::string server = "127.0.0.1:50051";
+  // Fusion servers (host:port); cameras of all are merged (the static model comes from the first).
+  std::vector<std::string> servers = {"127.0.0.1:50051"};
   std::string token;  // viewer bearer token
   std::string viewer_id = "ave-viewer";
   bool headless = false;
   std::string snapshot_path;  // PNG written after the headless render, or on 'p' / close in a window
+  std::string depth_path;     // OpenEXR of the browse view's linear depth (metres), with the snapshot
+  std::string record_dir;     // a PNG per frame drawn: DIR/frame_000000.png, ...
   int width = 1280, height = 720;
   std::string layout = "quad";               // "quad" or "browse" (browse view only)
   std::vector<std::string> locked_cameras;   // up to 3 for the locked views; default: the first by id
   std::vector<std::string> camera_filter;    // subscribe to these only (empty = all)
+  std::string selected_camera;               // highlighted in every view from the start
   int wait_cameras = 0;                      // headless: wait until this many cameras have frames (0: all locked)
   double timeout_s = 30;                     // headless: give up waiting after this long
   float max_rate_hz = 30;
@@ -30,7 +34,9 @@ struct ViewerOptions {
   Eigen::Vector3d target = Eigen::Vector3d(0, 0, 0);
   double browse_fov_deg = 55;
   bool draw_frustums = true;
-  int max_frames = 0;  // window: close after this many frames (0 = until the user closes it)
+  bool panel = true;        // the on-screen panel and annotations (ImGui)
+  bool select_data = true;  // data selection: frames only of cameras whose frustum meets a view
+  int max_frames = 0;  // window: close after this many frames (0 = until the user closes it); headless: frames to draw (0 = 1)
   // TLS to the server (issue 8): PEM CA of the server certificate (empty = plaintext), and an
   // optional client certificate and key for mutual TLS.
   std::string tls_ca, tls_cert, tls_key, tls_server_name;
@@ -50,6 +56,8 @@ View BrowseView(const Viewport& viewport, const Eigen::Vector3d& eye, const Eige
 // The quad layout: browse view top-left, then views locked to `locked` (ids of projectors).
 std::vector<View> QuadViews(int width, int height, const View& browse, const std::vector<Projector>& projectors,
                             const std::vector<std::string>& locked);
+// The frusta the server should select cameras by: every view's clip-from-local matrix.
+SelectionViews SelectionOf(const std::vector<View>& views);
 // Writes RGBA8 rows-top-first pixels as a PNG.
 absl::Status WritePng(const std::string& path, const std::vector<uint8_t>& rgba, int width, int height);
 

@@ -256,6 +256,12 @@ absl::StatusOr<std::unique_ptr<WindowContext>> CreateWindowContext(const WindowO
   glfwSetCharCallback(impl->window, [](GLFWwindow* w, unsigned int codepoint) {
     if (codepoint >= 32 && codepoint < 127) WindowContext::Impl::From(w)->pending.typed.push_back(static_cast<char>(codepoint));
   });
+  glfwSetMouseButtonCallback(impl->window, [](GLFWwindow* w, int button, int action, int) {
+    if (action != GLFW_PRESS) return;
+    WindowInput& in = WindowContext::Impl::From(w)->pending;
+    if (button == GLFW_MOUSE_BUTTON_LEFT) ++in.left_presses;
+    if (button == GLFW_MOUSE_BUTTON_MIDDLE) ++in.middle_presses;
+  });
   glfwSetKeyCallback(impl->window, [](GLFWwindow* w, int key, int, int action, int) {
     if (key == GLFW_KEY_ESCAPE && action == GLFW_PRESS) WindowContext::Impl::From(w)->pending.escape_pressed = true;
   });
@@ -311,6 +317,17 @@ WindowInput WindowContext::TakeInput() {
   input.up = held(GLFW_KEY_E);
   input.down = held(GLFW_KEY_Q);
   input.fast = held(GLFW_KEY_LEFT_SHIFT) || held(GLFW_KEY_RIGHT_SHIFT);
+  auto button = [&](int b) { return glfwGetMouseButton(impl_->window, b) == GLFW_PRESS; };
+  input.left_down = button(GLFW_MOUSE_BUTTON_LEFT);
+  input.right_down = button(GLFW_MOUSE_BUTTON_RIGHT);
+  input.middle_down = button(GLFW_MOUSE_BUTTON_MIDDLE);
+  double x = 0, y = 0;
+  int window_w = 0, window_h = 0;
+  glfwGetCursorPos(impl_->window, &x, &y);
+  glfwGetWindowSize(impl_->window, &window_w, &window_h);
+  if (window_w > 0 && window_h > 0 && x >= 0 && y >= 0 && x < window_w && y < window_h) {
+    input.cursor_px = {x * framebuffer_width() / window_w, y * framebuffer_height() / window_h};
+  }
   return input;
 }
 

@@ -73,6 +73,11 @@ struct WindowInput {
   bool forward = false, back = false, left = false, right = false, up = false, down = false, fast = false;
   std::string typed;             // printable ASCII typed since the last call ("1", "f", ...)
   bool escape_pressed = false;   // Escape went down since the last call
+  // For the viewer's on-screen panel and picking (added by h7b): the cursor in framebuffer pixels
+  // from the top-left corner ((-1, -1) when outside), buttons held now, presses since the last call.
+  Eigen::Vector2d cursor_px = Eigen::Vector2d(-1, -1);
+  bool left_down = false, right_down = false, middle_down = false;
+  int left_presses = 0, middle_presses = 0;
 };
 
 // GLFW window with a 3.3 core context (needs DISPLAY; under Xvfb it gets llvmpipe).

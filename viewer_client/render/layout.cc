@@ -14,6 +14,18 @@ std::string RendererOptions::Check() const {
   if (!std::isfinite(ambient) || ambient < 0 || ambient > 1) return "ambient must be in [0, 1]";
   if (!std::isfinite(diffuse) || diffuse < 0 || diffuse > 1) return "diffuse must be in [0, 1]";
   if (!std::isfinite(frustum_depth_m) || frustum_depth_m <= 0) return "frustum_depth_m must be finite and > 0";
+  if (max_retained < 0 || max_retained > 256) return "max_retained must be in 0..256";
+  if (max_retained_per_camera < 1) return "max_retained_per_camera must be >= 1";
+  if (!std::isfinite(retention_turn_deg) || retention_turn_deg <= 0) return "retention_turn_deg must be finite and > 0";
+  if (!std::isfinite(retention_move_m) || retention_move_m <= 0) return "retention_move_m must be finite and > 0";
+  if (!std::isfinite(sky_radius_m) || sky_radius_m < 0) return "sky_radius_m must be finite and >= 0";
+  if (const std::string why = display.Check(); !why.empty()) return "display." + why;
+  return {};
+}
+
+std::string DisplayOptions::Check() const {
+  if (!std::isfinite(seam_feather) || seam_feather < 0 || seam_feather > 1) return "seam_feather must be in [0, 1]";
+  if (std::isnan(retention_half_life_s)) return "retention_half_life_s must not be NaN";
   return {};
 }
 

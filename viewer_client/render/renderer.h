@@ -1,8 +1,37 @@
 #pragma once
 // The AVE renderer (paper sections 7-8): the static model shaded by a fixed sun, live camera frames
-// projected onto it as projective textures with shadow-map visibility, dynamic objects as boxes,
-// and camera frustum wireframes. Everything is in the model's local frame (metres, the
-// TriangleMesh origin); large world coordinates never reach the GPU.
+// projected onto it as projective textures with shadow-map visibility, dynamic objects as standing
+// models, camera frustum wireframes and object paths. Everything is in the model's local frame
+// (metres, the TriangleMesh origin); large world coordinates never reach the GPU: convert world
+// poses to local in double (subtract the origin) before building matrices.
+//
+// How a frame is drawn (deferred, issue 7; see docs/ARCHITECTURE.md): per view, the model goes once
+// into a G-buffer (shaded colour, normal, depth); then each projector whose frustum meets the view
+// adds its video in a screen-space pass limited to its frustum's footprint (back faces of the
+// frustum volume), weighted per pixel by the overlap policy; then a resolve pass writes colour and
+// depth into the caller's framebuffer, and lines (frustums, paths) are drawn on top. Shadow maps are
+// rendered only when a projector's pose or the geometry changed. Cost on llvmpipe (issue 7
+// performance, docs/BENCHMARKS.md "## Rendering"): the static model is split into grid chunks and
+// each view or shadow map draws only the chunks its frustum may see; the projector pass rejects
+// pixels outside the frustum before its other work; the resolve is compiled per combination of
+// live / retained passes present, so a view without video pays only for colour and depth.
+//
+// Texture retention: when a camera turns away (its pose leaves the pose of its last snapshot by
+// more than RendererOptions::retention_turn_deg / retention_move_m), its last frame, pose and
+// capture time become a "retained snapshot" (a copy of the video layer plus the old projector,
+// with its own static shadow map). Removing or disabling a camera removes its live imagery at
+// once; snapshots it left behind earlier stay until they fade. Snapshots are drawn under the live
+// video only where no live camera reaches, faded by 0.5^(age / half-life); newer snapshots win over
+// older ones. Chosen over a model-space texture atlas because it costs nothing while no camera
+// turns (one layer copy per snapshot, its shadow map once), where an atlas needs a bake pass over
+// the textured model on every new frame, which llvmpipe cannot afford. The price: a panning camera
+// leaves a snapshot only every retention_turn_deg (at most max_retained_per_camera kept), so
+// imagery seen only in between is not kept.
+//
+// For the application (h7b): keep using SetProjectors / SetDynamicObjects / Render as before. New:
+// SetDynamicModels (billboard / cuboid / cylinder), SetPaths (polylines), SetDisplayOptions (overlap
+// policy, retention half-life, age tint, sky: ImGui toggles), SetClock (replay time), StaleCameras()
+// (cameras whose last pose had NaNs), ReadLinearDepth + WriteDepthExr (--depth F.exr).
 //
 // Needs a current GL 3.3+ core context (gl_context.h) for its whole life: create it after the
 // context is current, call it on that thread, destroy it before the context.
@@ -21,9 +50,16 @@
 
 namespace ave::viewer {
 
-// Projectors are uniform arrays in the scene shader (shaders/scene.frag.glsl MAX_PROJECTORS);
-// SetProjectors rejects more. Issue 7 raises the limit to 50.
-inline constexpr int kMaxProjectors = 16;
+// Live projectors are layers of one video texture array and one shadow-map array; SetProjectors
+// rejects more than this.
+inline constexpr int kMaxProjectors = 64;
+
+// Where several cameras see the same surface point.
+enum class OverlapPolicy {
+  kBlendBestView,  // weighted by view angle and resolution (cos / distance^2), seams feathered
+  kBestView,       // the same weight to the 4th power: close to the single best camera, soft seams
+  kLastWins,       // the later projector in the list paints over earlier ones
+};
 
 // A rectangle of the framebuffer in pixels, GL convention: (x, y) is its bottom-left corner,
 // counted from the framebuffer's bottom-left pixel.
@@ -48,7 +84,14 @@ struct Projector {
   uint64_t image_serial = 0;
   Eigen::Vector3f color = Eigen::Vector3f(1, 1, 0);  // frustum colour, rgb in [0, 1]
   bool enabled = true;                               // disabled: neither projected nor drawn
+  // Lens distortion of the frame (Intrinsics.distortion: k1 k2 p1 p2 k3, OpenCV order; zeros: an
+  // ideal pinhole). The shader applies the forward model to find the frame pixel of a surface point.
+  std::array<double, 5> distortion{};
 };
+
+// A projector with a non-finite view, projection or position is not rejected: SetProjectors keeps
+// the camera's last good pose and frame (or skips it if it never had one) and lists it in
+// Renderer::StaleCameras() until a finite pose arrives (issue 7 hard case: a pose with NaNs).
 
 // A moving object drawn as a solid box; it receives projected video and (by default) casts
 // shadows in the projectors' shadow maps.
@@ -59,14 +102,51 @@ struct DynamicBox {
   Eigen::Vector3f color = Eigen::Vector3f(0.8f, 0.2f, 0.2f);
 };
 
+// How a dynamic object is modelled (proto ObjectModel).
+enum class ModelShape {
+  kCuboid,     // oriented box
+  kCylinder,   // upright cylinder, diameter = size.y (width), 16 sides
+  kBillboard,  // two crossed upright quads (size.y wide): looks the same from every side
+};
+
+// A standing model for a DynamicObject (h7b converts from the proto; local frame).
+struct DynamicModel {
+  Eigen::Vector3d base = Eigen::Vector3d::Zero();  // ground contact, bottom centre
+  double heading_rad = 0;                          // length axis from local +x, counter-clockwise
+  Eigen::Vector3d size = Eigen::Vector3d(0.6, 0.4, 1.8);  // length (along heading), width, height; metres
+  Eigen::Vector3f color = Eigen::Vector3f(0.8f, 0.2f, 0.2f);
+  ModelShape shape = ModelShape::kCuboid;
+};
+
+// A polyline drawn as lines (object paths), local frame.
+struct Polyline {
+  std::vector<Eigen::Vector3d> points;
+  Eigen::Vector3f color = Eigen::Vector3f(1, 1, 1);
+};
+
 // One picture in the framebuffer.
 struct View {
   Viewport viewport;
   Eigen::Matrix4d view = Eigen::Matrix4d::Identity();        // GL eye from local
   Eigen::Matrix4d projection = Eigen::Matrix4d::Identity();  // GL clip from eye
   bool draw_frustums = true;
+  bool draw_paths = true;           // the polylines of SetPaths
   std::string highlight_camera_id;  // this projector's frustum is drawn brighter and thicker
   Eigen::Vector3f clear_color = Eigen::Vector3f(0.62f, 0.74f, 0.86f);  // sky
+};
+
+// What the user may toggle at any time (Renderer::SetDisplayOptions).
+struct DisplayOptions {
+  OverlapPolicy overlap = OverlapPolicy::kBlendBestView;
+  // Seam feathering: a projector's weight falls to zero over this fraction of its image's
+  // half-width at the image border (0: hard edges).
+  double seam_feather = 0.1;
+  // Retained imagery fades as 0.5^(age / half-life); <= 0 turns retained imagery off.
+  double retention_half_life_s = 60;
+  bool tint_by_age = false;  // tint retained imagery from yellow (fresh) to blue (old)
+  bool sky = true;           // a sky dome receives imagery above the horizon
+
+  std::string Check() const;  // empty when usable; otherwise names the first bad field
 };
 
 struct RendererOptions {
@@ -82,6 +162,18 @@ struct RendererOptions {
   double frustum_depth_m = 12;
   // Dynamic boxes occlude video behind them. Costs a depth copy per projector per change.
   bool dynamic_objects_cast_shadows = true;
+  // Retained snapshots: at most this many in all (texture layers), and per camera.
+  int max_retained = 16;
+  int max_retained_per_camera = 2;
+  // A camera turning by more than this (optical axis) or moving more than this since its last
+  // snapshot leaves a snapshot of its previous pose and frame behind.
+  double retention_turn_deg = 10;
+  double retention_move_m = 1.0;
+  // Sky dome (elevation -10 to 90 degrees) centred on the bottom centre of the static model's
+  // bounding box; radius in metres, 0: 1.2 x the box's half diagonal (at least 100 m). Projectors
+  // reach it only within their far plane. It is drawn in the view's clear colour.
+  double sky_radius_m = 0;
+  DisplayOptions display;
 
   // Empty when usable; otherwise names the first bad field.
   std::string Check() const;
@@ -93,6 +185,11 @@ struct RenderStats {
   uint64_t shadow_map_renders = 0;      // static-mesh passes into a projector's shadow layer
   uint64_t dynamic_shadow_updates = 0;  // dynamic-box passes into a projector's shadow layer
   uint64_t video_uploads = 0;
+  uint64_t projector_passes = 0;     // per-camera screen-space passes drawn (live + retained)
+  uint64_t projectors_culled = 0;    // per-view projector passes skipped: frustum outside the view
+  uint64_t retained_snapshots = 0;   // snapshots taken
+  uint64_t retained_shadow_renders = 0;
+  uint64_t chunks_culled = 0;        // static-model chunks skipped (G-buffer and shadow passes): off screen
 };
 
 class Renderer {
@@ -107,11 +204,23 @@ class Renderer {
   absl::Status SetStaticMesh(const TriangleMesh& mesh);
   // The projectors in order; index i uses texture layer i. At most kMaxProjectors.
   absl::Status SetProjectors(const std::vector<Projector>& projectors);
-  absl::Status SetDynamicObjects(const std::vector<DynamicBox>& boxes);
+  absl::Status SetDynamicObjects(const std::vector<DynamicBox>& boxes);  // = cuboid DynamicModels
+  absl::Status SetDynamicModels(const std::vector<DynamicModel>& models);
+  absl::Status SetPaths(const std::vector<Polyline>& paths);
+  absl::Status SetDisplayOptions(const DisplayOptions& display);
+  // Seconds on any monotonic clock for snapshot ages; until the first call the renderer uses its
+  // own steady clock. Replays and tests pass their own time.
+  void SetClock(double now_s);
+  // Cameras whose last SetProjectors entry had a non-finite pose, sorted.
+  std::vector<std::string> StaleCameras() const;
 
   // Draws the views into the currently bound draw framebuffer, each viewport cleared first.
   // Shadow maps are refreshed first where projectors or geometry changed.
   absl::Status Render(const std::vector<View>& views, int framebuffer_width, int framebuffer_height);
+
+  // Linear depth (metres along the view's optical axis) of `view` as drawn by the last Render
+  // (pass the same View); width * height floats, rows top first; +inf where only sky or nothing.
+  absl::StatusOr<std::vector<float>> ReadLinearDepth(const View& view) const;
 
   const RendererOptions& options() const;
   RenderStats stats() const;
@@ -125,6 +234,9 @@ class Renderer {
 // The model's own colour as the scene shader shades it where no video falls (tests use it).
 Eigen::Vector3f ShadedModelColor(const RendererOptions& options, const Eigen::Vector3f& color,
                                  const Eigen::Vector3f& normal);
+
+// Writes a single-channel float OpenEXR image (channel "Z"), rows top first (--depth F.exr).
+absl::Status WriteDepthExr(const std::string& path, const std::vector<float>& depth, int width, int height);
 
 // Four equal quadrants of a width x height framebuffer, in GL viewport coordinates (origin at the
 // bottom-left): [0] top-left (the browse view), [1] top-right, [2] bottom-left, [3] bottom-right

@@ -71,8 +71,15 @@ absl::StatusOr<unsigned int> BuildProgram(std::string_view vertex_name, std::str
   return program;
 }
 
-absl::StatusOr<unsigned int> BuildEmbeddedProgram(std::string_view vertex_name, std::string_view fragment_name) {
-  return BuildProgram(vertex_name, EmbeddedShader(vertex_name), fragment_name, EmbeddedShader(fragment_name));
+absl::StatusOr<unsigned int> BuildEmbeddedProgram(std::string_view vertex_name, std::string_view fragment_name,
+                                                  std::string_view fragment_defines) {
+  std::string fragment(EmbeddedShader(fragment_name));
+  if (!fragment_defines.empty()) {
+    const size_t line_end = fragment.find('\n');
+    if (line_end == std::string::npos) return absl::InvalidArgumentError(std::string(fragment_name) + ": no #version line");
+    fragment.insert(line_end + 1, fragment_defines);
+  }
+  return BuildProgram(vertex_name, EmbeddedShader(vertex_name), fragment_name, fragment);
 }
 
 }  // namespace ave::viewer::internal

@@ -15,7 +15,10 @@ std::string_view EmbeddedShader(std::string_view name);
 absl::StatusOr<unsigned int> BuildProgram(std::string_view vertex_name, std::string_view vertex_source,
                                           std::string_view fragment_name, std::string_view fragment_source);
 
-// BuildProgram on two embedded shaders.
-absl::StatusOr<unsigned int> BuildEmbeddedProgram(std::string_view vertex_name, std::string_view fragment_name);
+// BuildProgram on two embedded shaders. `fragment_defines` ("#define LIVE\n...") is inserted after
+// the fragment shader's #version line: one source, several specialised programs (llvmpipe runs
+// both sides of a branch on a uniform, so a feature a pass does not use is compiled out instead).
+absl::StatusOr<unsigned int> BuildEmbeddedProgram(std::string_view vertex_name, std::string_view fragment_name,
+                                                  std::string_view fragment_defines = {});
 
 }  // namespace ave::viewer::internal

@@ -1,0 +1,86 @@
+#pragma once
+// The viewer's on-screen layer (issue 7 item 4, AVE §8): a Dear ImGui panel with the camera list
+// (status live / stale / lost, lock to a view, select), a time line of the frames received, and
+// display toggles; plus annotations drawn into each view (camera names, object ids, paths). It is
+// drawn over the rendered views in a window and headless alike, so snapshots show it.
+// ImGui and GL stay in overlay.cc.
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "absl/status/statusor.h"
+#include "viewer_client/client/scene_client.h"
+#include "viewer_client/render/gl_context.h"
+#include "viewer_client/render/renderer.h"
+
+namespace ave::viewer {
+
+// What the user sets through the panel and by picking.
+struct OverlayState {
+  DisplayOptions display;  // sent to Renderer::SetDisplayOptions when it changes
+  bool frustums = true;
+  bool paths = true;
+  bool annotations = true;
+  bool panel = true;
+  bool select_data = true;  // data selection: ask the server for frames of cameras in view only
+  std::string selected_camera;                  // highlighted in every view
+  std::array<std::string, 3> locked;            // cameras of the three locked views ("" = plan view)
+};
+
+// Figures the panel shows.
+struct OverlayStats {
+  double fps = 0;
+  int cameras_receiving = 0;  // cameras whose frames arrived in the last 2 s
+  double jpeg_bytes_per_s = 0;
+  uint64_t subscriptions = 0;
+  int servers = 1;
+};
+
+// Where a local-frame point lands in the framebuffer: pixels from the top-left corner; nullopt
+// when behind the eye or outside the view's viewport.
+std::optional<Eigen::Vector2d> ProjectToScreen(const View& view, int framebuffer_height, const Eigen::Vector3d& p_local);
+
+// The camera whose position is drawn nearest `cursor_px` (top-left pixels) in `view`, within
+// `radius_px`; empty when none.
+std::string PickCamera(const View& view, int framebuffer_height, const std::vector<CameraView>& cameras,
+                       const Eigen::Vector2d& cursor_px, double radius_px = 16);
+
+// The ray through a framebuffer pixel (top-left pixels) of `view`: origin on the near plane and
+// unit direction, local frame.
+std::pair<Eigen::Vector3d, Eigen::Vector3d> PixelRayOfView(const View& view, int framebuffer_height,
+                                                           const Eigen::Vector2d& cursor_px);
+
+class Overlay {
+ public:
+  // Needs the current GL context (it compiles ImGui's GL 3.3 shaders and uploads the font).
+  static absl::StatusOr<std::unique_ptr<Overlay>> Create();
+  ~Overlay();
+  Overlay(const Overlay&) = delete;
+  Overlay& operator=(const Overlay&) = delete;
+
+  // Starts a frame of the given framebuffer size; `input` (window mode) feeds mouse and typing.
+  void BeginFrame(int framebuffer_width, int framebuffer_height, const WindowInput* input, double dt_s);
+  // Whether the panel took the mouse in this frame (then the 3D views ignore it).
+  bool WantsMouse() const;
+  // The panel; edits `state`. `now_ns`: the server clock of the newest update (time line).
+  void Panel(const std::vector<CameraView>& cameras, const OverlayStats& stats, int64_t now_ns, OverlayState& state);
+  // Camera names, object ids and paths in one view.
+  void Annotate(const View& view, int framebuffer_height, const std::vector<CameraView>& cameras,
+                const std::vector<ObjectView>& objects, const OverlayState& state);
+  // Draws everything into the currently bound framebuffer.
+  void EndFrame();
+  // Headless: builds one frame and throws it away so auto-sized windows have their size.
+  void DiscardFrame();
+
+ private:
+  Overlay() = default;
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace ave::viewer

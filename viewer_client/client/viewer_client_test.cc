@@ -1,0 +1,170 @@
+// The viewer application's pure parts: the browse camera (fly and orbit), picking and screen
+// projection of annotations, and when a view change is worth a new subscription.
+#include <epoxy/gl.h>
+#include <gtest/gtest.h>
+
+#include "model_store/geometry/camera.h"
+#include "viewer_client/client/browse_camera.h"
+#include "viewer_client/client/overlay.h"
+#include "viewer_client/client/scene_client.h"
+#include "viewer_client/client/viewer_app.h"
+#include "viewer_client/render/gl_context.h"
+
+namespace ave::viewer {
+namespace {
+
+// Where the pivot appears in the browse view, in NDC.
+Eigen::Vector2d PivotNdc(const BrowseCamera& cam) {
+  const View v = BrowseView({0, 0, 640, 480}, cam.eye(), cam.Target(), 60);
+  const Eigen::Vector4d clip = v.projection * v.view * cam.pivot().homogeneous();
+  return clip.head<2>() / clip.w();
+}
+
+TEST(BrowseCamera, OrbitKeepsThePivotCentredAndItsDistance) {
+  BrowseCamera cam({-50, -60, 40}, {10, 5, 0});
+  const double r = (cam.eye() - cam.pivot()).norm();
+  for (const Eigen::Vector2d drag : {Eigen::Vector2d(120, 0), Eigen::Vector2d(0, 60), Eigen::Vector2d(-300, -200)}) {
+    cam.Apply({.orbit_px = drag});
+    EXPECT_NEAR((cam.eye() - cam.pivot()).norm(), r, 1e-9 * r);
+    EXPECT_LT(PivotNdc(cam).norm(), 1e-6) << "drag " << drag.transpose();
+  }
+  EXPECT_NEAR(cam.pivot().x(), 10, 1e-12);
+}
+
+TEST(BrowseCamera, OrbitOverTheTopStopsShortOfVertical) {
+  BrowseCamera cam({-50, 0, 10}, {0, 0, 0});
+  cam.Apply({.orbit_px = Eigen::Vector2d(0, 1e5)});
+  const Eigen::Vector3d offset = cam.eye() - cam.pivot();
+  EXPECT_GT(offset.z(), 0.99 * offset.norm());
+  EXPECT_GT(offset.head<2>().norm(), 1e-3);  // never exactly vertical: LookAt stays defined
+  EXPECT_TRUE(cam.WorldFromCamera().translation.allFinite());
+  EXPECT_LT(PivotNdc(cam).norm(), 1e-6);
+}
+
+TEST(BrowseCamera, FlyMovesAlongTheViewAndDragsThePivot) {
+  BrowseCamera cam({0, 0, 10}, {100, 0, 10});
+  cam.set_speed(10);
+  cam.Apply({.forward = 1, .dt_s = 0.5});
+  EXPECT_NEAR(cam.eye().x(), 5, 1e-9);
+  EXPECT_NEAR(cam.pivot().x(), 105, 1e-9);
+  cam.Apply({.right = 1, .fast = true, .dt_s = 0.5});  // 4x: 20 m to the right of +x = -y
+  EXPECT_NEAR(cam.eye().y(), -20, 1e-9);
+  cam.Apply({.up = -1, .dt_s = 1});
+  EXPECT_NEAR(cam.eye().z(), 0, 1e-9);
+}
+
+TEST(BrowseCamera, MouseLookTurnsWithoutMovingAndWheelApproachesThePivot) {
+  BrowseCamera cam({0, 0, 10}, {100, 0, 10});
+  const Eigen::Vector3d eye = cam.eye();
+  cam.Apply({.look_px = Eigen::Vector2d(-M_PI / 2 / BrowseCamera::kRadPerPx, 0)});  // 90 degrees left
+  EXPECT_EQ(cam.eye(), eye);
+  EXPECT_NEAR(cam.Forward().y(), 1, 1e-9);
+  BrowseCamera zoom({0, 0, 10}, {100, 0, 10});
+  zoom.Apply({.wheel = 1});
+  EXPECT_NEAR(zoom.eye().x(), 10, 1e-9);
+  zoom.Apply({.wheel = 1000});  // never through the pivot
+  EXPECT_NEAR((zoom.pivot() - zoom.eye()).norm(), 1, 1e-9);
+}
+
+TEST(Overlay, ProjectAndPickAndRayAgree) {
+  const View view = BrowseView({100, 50, 640, 480}, {0, -80, 60}, {0, 0, 0}, 60);
+  const int fb_h = 720;
+  const Eigen::Vector3d p(12, 7, 3);
+  const auto px = ProjectToScreen(view, fb_h, p);
+  ASSERT_TRUE(px);
+  EXPECT_GT(px->x(), 100);
+  EXPECT_LT(px->x(), 740);
+  EXPECT_GT(px->y(), fb_h - 530);
+  EXPECT_LT(px->y(), fb_h - 50);
+  // The pixel's ray passes through the point.
+  const auto [origin, dir] = PixelRayOfView(view, fb_h, *px);
+  const Eigen::Vector3d to_p = p - origin;
+  EXPECT_LT((to_p - to_p.dot(dir) * dir).norm(), 1e-6 * to_p.norm());
+  // Behind the eye or outside the viewport: not drawn.
+  EXPECT_FALSE(ProjectToScreen(view, fb_h, {0, -200, 150}));
+  EXPECT_FALSE(ProjectToScreen(view, fb_h, {5000, 0, 0}));
+
+  CameraView a, b;
+  a.id = "a";
+  a.world_from_camera.translation = p;
+  b.id = "b";
+  b.world_from_camera.translation = {-30, 10, 5};
+  EXPECT_EQ(PickCamera(view, fb_h, {a, b}, *px + Eigen::Vector2d(5, -5)), "a");
+  EXPECT_EQ(PickCamera(view, fb_h, {a, b}, *px + Eigen::Vector2d(40, 0)), "");
+}
+
+// Headless (EGL): the panel and the labels are in the pixels a snapshot reads back.
+TEST(Overlay, PanelAndLabelsAppearHeadless) {
+  constexpr int kW = 640, kH = 360;
+  auto context = CreateHeadlessContext(kW, kH);
+  ASSERT_TRUE(context.ok()) << context.status();
+  ASSERT_TRUE((*context)->MakeCurrent().ok());
+  auto overlay = Overlay::Create();
+  ASSERT_TRUE(overlay.ok()) << overlay.status();
+  CameraView cam;
+  cam.id = "camA";
+  cam.status = CameraLiveness::kLive;
+  cam.world_from_camera.translation = {0, 0, 0};
+  const View view = BrowseView({0, 0, kW, kH}, {0, -60, 40}, {0, 0, 0}, 60);
+  const auto label_at = ProjectToScreen(view, kH, cam.world_from_camera.translation);
+  ASSERT_TRUE(label_at);
+  auto draw = [&](bool panel, bool labels) {
+    (*context)->BindFramebuffer();
+    glViewport(0, 0, kW, kH);
+    glClearColor(0.2f, 0.3f, 0.4f, 1);
+    glClear(GL_COLOR_BUFFER_BIT);
+    OverlayState state;
+    state.panel = panel;
+    state.annotations = labels;
+    for (int pass = 0; pass < 2; ++pass) {  // the first frame sizes the auto-sized panel
+      (*overlay)->BeginFrame(kW, kH, nullptr, 1.0 / 30);
+      if (state.panel) (*overlay)->Panel({cam}, {}, 0, state);
+      (*overlay)->Annotate(view, kH, {cam}, {}, state);
+      if (pass == 0) (*overlay)->DiscardFrame();
+    }
+    (*overlay)->EndFrame();
+    auto pixels = (*context)->ReadPixels();
+    EXPECT_TRUE(pixels.ok());
+    return *pixels;
+  };
+  const std::vector<uint8_t> bare = draw(false, false), with = draw(true, true);
+  auto differs = [&](int x0, int y0, int x1, int y1) {
+    int n = 0;
+    for (int y = y0; y < y1; ++y)
+      for (int x = x0; x < x1; ++x)
+        for (int c = 0; c < 3; ++c) n += bare[(size_t(y) * kW + x) * 4 + c] != with[(size_t(y) * kW + x) * 4 + c];
+    return n;
+  };
+  EXPECT_GT(differs(10, 10, 100, 40), 500) << "no panel at the top left";
+  const int lx = int(label_at->x()), ly = int(label_at->y());
+  EXPECT_GT(differs(lx + 6, ly - 16, lx + 40, ly), 100) << "no label right above the camera marker";
+  EXPECT_EQ(differs(kW - 60, kH - 40, kW, kH), 0) << "the overlay drew where nothing belongs";
+}
+
+TEST(DataSelection, SmallMovesKeepTheSubscriptionLargeOnesRenewIt) {
+  auto views = [](const Eigen::Vector3d& eye, const Eigen::Vector3d& target, int n) {
+    std::vector<View> out(n, BrowseView({0, 0, 640, 480}, eye, target, 60));
+    return SelectionOf(out);
+  };
+  const SelectionViews base = views({0, -80, 60}, {0, 0, 0}, 1);
+  EXPECT_FALSE(ViewsDifferALot(base, base));
+  EXPECT_FALSE(ViewsDifferALot(base, views({0.5, -80, 60}, {0.5, 0, 0}, 1)));
+  EXPECT_TRUE(ViewsDifferALot(base, views({0, -80, 60}, {60, 0, 0}, 1)));  // turned
+  EXPECT_TRUE(ViewsDifferALot(base, views({80, -80, 60}, {80, 0, 0}, 1)));  // moved a block
+  EXPECT_TRUE(ViewsDifferALot(base, views({0, -80, 60}, {0, 0, 0}, 2)));   // a view added
+  EXPECT_TRUE(ViewsDifferALot(base, SelectionViews{}));                   // selection switched off
+}
+
+TEST(ViewerOptions, CheckNamesTheProblem) {
+  ViewerOptions o;
+  EXPECT_EQ(o.Check(), "");
+  o.headless = true;
+  EXPECT_NE(o.Check().find("--snapshot"), std::string::npos);
+  o.record_dir = "/tmp/x";
+  EXPECT_EQ(o.Check(), "");
+  o.servers = {};
+  EXPECT_NE(o.Check().find("server"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace ave::viewer

@@ -1,0 +1,107 @@
+#version 330 core
+// Projective texture mapping with shadow-map visibility (AVE paper sections 7-8), one projector per
+// pass, deferred: the surface point comes from the G-buffer under this pixel.
+//
+// The video frame lies in layer u_layer of u_video (top row at t = 0), the projector's depth in the
+// same layer of u_shadow, rendered with u_shadow_clip_from_local (the projection widened by the
+// distortion margin). A point takes the video where it lies inside the frustum (near..far and the
+// distorted image), faces the projector and passes the shadow test. Output 0: (weight * video,
+// weight), summed by blending (last-wins: replaced); output 1: weight * fade of a retained
+// snapshot, summed (so the resolve gets the weighted mean fade).
+//
+// Cost (llvmpipe runs every instruction for every pixel of the footprint unless a whole block of
+// pixels has discarded): the cheapest rejections come first. The window position and depth give
+// the surface point and its clip coordinate in the projector, so pixels outside the frustum or the
+// image die before the normal is fetched; the shadow-map coordinate reuses the clip coordinate
+// (the shadow projection only widens x and y) plus the normal offset; divisions are reciprocals,
+// no pow(). (Folding the view's inverse and the projector's matrix into one matrix saves one more
+// product but loses enough float precision on far points to double the visibility error against
+// 4096 px shadow maps: the point is computed first.)
+uniform sampler2D u_gbuffer_normal;  // packed unit normal; a: 0 where nothing was drawn
+uniform sampler2D u_gbuffer_depth;   // window depth in [0, 1]
+uniform mat4 u_local_from_window;   // local point (homogeneous) from (window x, y, NDC z, 1) of the view
+
+uniform mat4 u_clip_from_local;        // this projector's projection * view
+uniform mat4 u_shadow_clip_from_local;  // the widened projection used for its shadow map
+uniform float u_shadow_widen;           // 1 / distortion margin: shadow clip xy = clip xy * this
+uniform vec3 u_projector_position;      // local frame
+uniform vec4 u_pinhole;                 // P00, P02, P11, P12 of the projection
+uniform vec4 u_k1_k2_p1_p2;
+uniform float u_k3;
+uniform bool u_distorted;
+uniform float u_layer;
+// Shadow lookups move the point off the surface along its normal by this many metres per metre of
+// distance to the projector (about one shadow-map texel): no acne on grazing surfaces, and none of
+// the peter-panning a large constant depth bias gives at building feet.
+uniform float u_normal_offset;
+uniform float u_feather;      // NDC distance from the image border over which the weight ramps up
+uniform bool u_best_view;     // weight to the 4th power (best view), else as is (blend)
+uniform bool u_last_wins;
+uniform float u_fade;         // 1 for live projectors; 0.5^(age / half-life) for retained ones
+uniform float u_weight_scale; // retained: fade^16 so newer snapshots win
+
+uniform sampler2DArray u_video;
+uniform sampler2DArrayShadow u_shadow;
+
+layout(location = 0) out vec4 o_accum;
+layout(location = 1) out vec4 o_fade;
+
+void main() {
+  ivec2 pixel = ivec2(gl_FragCoord.xy);
+  float depth = texelFetch(u_gbuffer_depth, pixel, 0).r;
+  if (depth == 1.0) discard;  // cleared: nothing drawn here
+  // x, y in window pixels, z in NDC: 2 depth - 1 is exact in float, where folding it into the
+  // matrix would cost ~5x the precision of far points (visible against 4096 px shadow maps).
+  vec4 window = vec4(gl_FragCoord.xy, 2.0 * depth - 1.0, 1.0);
+  vec4 local_h = u_local_from_window * window;
+  float inv_w = 1.0 / local_h.w;
+  vec3 position = local_h.xyz * inv_w;
+  vec4 clip = u_clip_from_local * vec4(position, 1.0);
+  if (clip.w <= 0.0 || abs(clip.z) > clip.w) discard;
+  vec2 ndc = clip.xy * (1.0 / clip.w);
+  if (u_distorted) {
+    // Forward Brown-Conrady model on the normalised (OpenCV) coordinates of the undistorted ray.
+    vec2 x = vec2((ndc.x + u_pinhole.y) / u_pinhole.x, -(ndc.y + u_pinhole.w) / u_pinhole.z);
+    float r2 = dot(x, x);
+    float radial = 1.0 + r2 * (u_k1_k2_p1_p2.x + r2 * (u_k1_k2_p1_p2.y + r2 * u_k3));
+    float p1 = u_k1_k2_p1_p2.z, p2 = u_k1_k2_p1_p2.w;
+    vec2 xd = x * radial + vec2(2.0 * p1 * x.x * x.y + p2 * (r2 + 2.0 * x.x * x.x),
+                                p1 * (r2 + 2.0 * x.y * x.y) + 2.0 * p2 * x.x * x.y);
+    ndc = vec2(u_pinhole.x * xd.x - u_pinhole.y, -u_pinhole.z * xd.y - u_pinhole.w);
+  }
+  vec2 border = 1.0 - abs(ndc);
+  float inside = min(border.x, border.y);
+  if (inside < 0.0) discard;
+
+  vec4 packed_normal = texelFetch(u_gbuffer_normal, pixel, 0);
+  if (packed_normal.a == 0.0) discard;
+  vec3 n = normalize(2.0 * packed_normal.xyz - 1.0);
+  vec3 to_projector = u_projector_position - position;
+  float distance_m = max(length(to_projector), 1e-6);
+  float inv_distance = 1.0 / distance_m;
+  float facing = dot(n, to_projector) * inv_distance;
+  if (facing <= 0.0) discard;
+
+  // The shadow clip coordinate of position + n * distance_m * u_normal_offset.
+  vec4 clip_shadow = vec4(clip.xy * u_shadow_widen, clip.zw) +
+                     (distance_m * u_normal_offset) * (u_shadow_clip_from_local * vec4(n, 0.0));
+  vec3 ndc_shadow = clip_shadow.xyz * (1.0 / max(clip_shadow.w, 1e-6));
+  if (any(greaterThan(abs(ndc_shadow.xy), vec2(1.0)))) discard;
+  float lit = texture(u_shadow, vec4(0.5 * ndc_shadow.xy + 0.5, u_layer, 0.5 * ndc_shadow.z + 0.5));
+  if (lit <= 0.0) discard;
+
+  vec3 video = texture(u_video, vec3(0.5 + 0.5 * ndc.x, 0.5 - 0.5 * ndc.y, u_layer)).rgb;
+  float weight = 1.0;
+  if (u_last_wins) {
+    o_accum = vec4(video, 1.0);
+  } else {
+    // Resolution: metres of surface per image pixel grow as distance / (focal * facing).
+    float resolution = u_pinhole.x / max(distance_m, 0.5);
+    float feather = u_feather > 0.0 ? smoothstep(0.0, u_feather, inside) : 1.0;
+    float w = max(facing * resolution * resolution * 100.0, 1e-8);
+    if (u_best_view) w = (w * w) * (w * w);
+    weight = w * max(feather, 1e-3) * u_weight_scale;
+    o_accum = vec4(weight * video, weight);
+  }
+  o_fade = vec4(weight * u_fade, 0.0, 0.0, 1.0);
+}
