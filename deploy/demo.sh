@@ -67,12 +67,12 @@ echo "demo: server on $server (TLS); registering the campus cameras"
 for cam in cam1 cam2 cam3; do
   # A token bound to this camera only (printed once by the server, kept here in memory).
   cam_token=$("$bin/ave-admin" --server "$server" issue-token --role sensor --camera "$cam" --label "demo $cam" 2>/dev/null)
-  "$bin/ave-agent" --server "$server" --camera "$cam" --source "sim:campus#$cam" --fps "${AVE_DEMO_FPS:-10}" \
+  "$bin/ave-agent" --server "$server" --camera "$cam" --source "sim:campus#$cam" --fps "${AVE_DEMO_FPS:-10}" --detect \
     --token "$cam_token" --tls-cert "$certs/sensor-$cam.pem" --tls-key "$certs/sensor-$cam.key" \
     >"$out/agent-$cam.out" 2>"$out/agent-$cam.log" &
   pids+=("$!")
 done
-echo "demo: 3 simulated camera agents streaming"
+echo "demo: 3 simulated camera agents streaming, detecting and tracking moving objects"
 
 if [ -n "${DISPLAY:-}" ] && [ "${AVE_DEMO_HEADLESS:-0}" != 1 ]; then
   echo "demo: opening the viewer window (close it to stop)"
@@ -81,6 +81,8 @@ if [ -n "${DISPLAY:-}" ] && [ "${AVE_DEMO_HEADLESS:-0}" != 1 ]; then
   "$bin/ave-viewer" --server "$server" --snapshot "$out/quad.png" --frames "${AVE_VIEWER_FRAMES:-0}"
 else
   echo "demo: no DISPLAY, rendering headless"
+  # Tracks become objects only after persisting 1 s (issue 6): let them form before the snapshot.
+  sleep "${AVE_DEMO_WARMUP_S:-4}"
   "$bin/ave-viewer" --server "$server" --headless --snapshot "$out/quad.png" --wait-cameras 3 --timeout 60
 fi
 echo "demo: quad view written to $out/quad.png"

@@ -2,12 +2,16 @@
 //   ave-agent --camera cam1 --source sim:campus#cam1 --server 127.0.0.1:50051 --token T
 #include <csignal>
 #include <cstdlib>
+#include <fstream>
 #include <iostream>
 #include <sstream>
 #include <thread>
 
 #include "model_store/common/cli.h"
 #include "model_store/common/log.h"
+#include "sensor_agent/detect/detect_run.h"
+#include "model_store/scene/intrinsics_file.h"
+#include "sensor_agent/pose/pose_source.h"
 #include "sensor_agent/stream/agent_streamer.h"
 
 namespace {
@@ -15,6 +19,36 @@ namespace {
 std::atomic<bool> g_stop{false};
 
 void OnSignal(int) { g_stop = true; }
+
+// --detect-only: detection and tracking on the source without a server (issue 6).
+int RunDetectOnly(const std::string& source_spec, const ave::AgentOptions& options, double fov_deg,
+                  const ave::detect::DetectorOptions& detector_options, const std::string& tracks_out) {
+  if (tracks_out.empty()) {
+    std::cerr << "ave-agent: --detect-only needs --out FILE (or '-')\n";
+    return 2;
+  }
+  auto source = ave::OpenSource(source_spec, {.fps = options.fps, .default_fov_deg = fov_deg});
+  if (!source.ok()) {
+    std::cerr << "ave-agent: " << source.status().message() << "\n";
+    return 1;
+  }
+  std::ofstream file;
+  if (tracks_out != "-") {
+    file.open(tracks_out);
+    if (!file) {
+      std::cerr << "ave-agent: cannot write --out " << tracks_out << "\n";
+      return 1;
+    }
+  }
+  std::ostream& out = tracks_out == "-" ? std::cout : file;
+  auto summary = ave::detect::RunDetectOnly(**source, detector_options, out, options.max_frames);
+  if (!summary.ok()) {
+    std::cerr << "ave-agent: " << summary.status().message() << "\n";
+    return 1;
+  }
+  std::cout << summary->ToJson() << std::endl;
+  return 0;
+}
 
 }  // namespace
 
@@ -27,7 +61,7 @@ int main(int argc, char** argv) {
   double fov_deg = 60;
   CLI::App app{"ave-agent: AVE sensor agent (capture, JPEG, pose, stream to the fusion server)"};
   app.add_option("--server", options.server, "fusion server host:port")->capture_default_str();
-  app.add_option("--camera", options.camera_id, "this camera's registered id")->required();
+  app.add_option("--camera", options.camera_id, "this camera's registered id (required unless --detect-only)");
   app.add_option("--token", options.token, "sensor bearer token (env AVE_SENSOR_TOKEN)");
   app.add_option("--source", source_spec, "sim:campus#ID, file:PATH, rtsp://..., v4l2:/dev/videoN")->required();
   app.add_option("--fps", options.fps, "frames per second to send")->capture_default_str()->check(CLI::Range(0.1, 240.0));
@@ -45,7 +79,36 @@ int main(int argc, char** argv) {
   app.add_option("--position", position, "mounting position x,y,z (m, site frame) for sources without a pose");
   app.add_option("--look-at", look_at, "point x,y,z the mounted camera looks at");
   app.add_option("--fov", fov_deg, "horizontal field of view (deg) for sources without intrinsics")->capture_default_str();
+  std::string pose_mode = "truth", pose_log, intrinsics_file;
+  app.add_option("--pose-mode", pose_mode, "pose of sim sources: truth, gps-imu or gps-imu-vision (fused, with covariance)")
+      ->capture_default_str()->check(CLI::IsMember({"truth", "gps-imu", "gps-imu-vision"}));
+  app.add_option("--pose-log", pose_log, "DIR with gps.csv and imu.csv for --pose-mode (default: simulated)");
+  app.add_option("--intrinsics", intrinsics_file, "intrinsics YAML (ave-calibrate --out) for sources without intrinsics");
+  bool detect = false, detect_only = false;
+  std::string tracks_out, background = "average";
+  app.add_flag("--detect", detect, "detect and track moving objects; their boxes go with each frame");
+  app.add_flag("--detect-only", detect_only, "detect and track without a server: one JSON per frame to --out");
+  app.add_option("--out", tracks_out, "--detect-only: tracks file, one JSON object per frame ('-' = stdout)");
+  app.add_option("--background", background, "background model: average, gaussian or mixture")
+      ->capture_default_str()->check(CLI::IsMember({"average", "gaussian", "mixture"}));
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-agent")) return *exit_code;
+  ave::detect::DetectorOptions detector_options;
+  ave::detect::ParseBackgroundKind(background, detector_options.background);
+  if (detect_only) return RunDetectOnly(source_spec, options, fov_deg, detector_options, tracks_out);
+  if (options.camera_id.empty()) {
+    std::cerr << "ave-agent: --camera is required (unless --detect-only)\n";
+    return 2;
+  }
+  if (detect) {
+    auto detector = std::make_shared<ave::detect::Detector>(detector_options);
+    options.detector = [detector](const ave::CapturedFrame& frame) {
+      std::vector<ave::FrameBox> boxes;
+      for (const auto& d : detector->Process(frame.bgr.data(), frame.width, frame.height, frame.scene_time_s)) {
+        boxes.push_back({d.track_id, d.corners, d.score});
+      }
+      return boxes;
+    };
+  }
   if (position.empty() != look_at.empty()) {
     std::cerr << "ave-agent: --position and --look-at go together\n";
     return 2;
@@ -62,7 +125,20 @@ int main(int argc, char** argv) {
     std::cerr << "ave-agent: " << why << "\n";
     return 2;
   }
-  auto source = ave::OpenSource(source_spec, {.fps = options.fps, .default_fov_deg = fov_deg});
+  ave::SourceOptions source_options{.fps = options.fps, .default_fov_deg = fov_deg};
+  if (!intrinsics_file.empty()) {
+    auto intrinsics = ave::calib::ReadIntrinsicsFile(intrinsics_file);
+    if (!intrinsics.ok()) {
+      std::cerr << "ave-agent: --intrinsics: " << intrinsics.status().message() << "\n";
+      return 2;
+    }
+    source_options.intrinsics = *intrinsics;
+  }
+  auto source = ave::OpenSource(source_spec, source_options);
+  if (source.ok()) {
+    source = ave::pose::WithFusedPose(std::move(*source), source_spec,
+                                      {.mode = *ave::pose::ParsePoseMode(pose_mode), .log_dir = pose_log});
+  }
   if (!source.ok()) {
     std::cerr << "ave-agent: " << source.status().message() << "\n";
     return 1;

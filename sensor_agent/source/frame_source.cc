@@ -78,6 +78,13 @@ class VideoCaptureSource final : public FrameSource {
     frame.capture_time_ns = WallNs();
     if (first_ns_ == 0) first_ns_ = frame.capture_time_ns;
     frame.scene_time_s = (frame.capture_time_ns - first_ns_) * 1e-9;
+    if (!live_) {
+      // A file: its own timeline (read faster or slower than real time, e.g. by --detect-only).
+      const double pos_ms = capture_->get(cv::CAP_PROP_POS_MSEC);
+      const double video_fps = capture_->get(cv::CAP_PROP_FPS);
+      if (pos_ms > 0 || count_ == 0) frame.scene_time_s = pos_ms * 1e-3;
+      else if (video_fps > 0) frame.scene_time_s = count_ / video_fps;
+    }
     frame.width = image.cols;
     frame.height = image.rows;
     frame.bgr.assign(image.data, image.data + image.total() * 3);

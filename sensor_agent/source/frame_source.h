@@ -27,6 +27,9 @@ struct CapturedFrame {
   int height = 0;
   std::vector<uint8_t> bgr;  // 3 bytes per pixel, top row first
   std::optional<Rigid3d> world_from_camera;  // the source's own pose, if it knows one
+  // Row-major 6x6 covariance of world_from_camera (position m, world rotation vector rad), as the
+  // wire Pose carries it; empty = unknown (sensor_agent/pose fills it, issue 5).
+  std::vector<double> pose_covariance;
 };
 
 class FrameSource {

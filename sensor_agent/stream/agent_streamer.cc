@@ -105,8 +105,21 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
     out.set_sequence(++sequence);
     if (frame.world_from_camera) {
       *out.mutable_pose() = ToProto(*frame.world_from_camera);
+      for (double c : frame.pose_covariance) out.mutable_pose()->add_covariance(c);
     } else if (options_.mounting_pose) {
       *out.mutable_pose() = ToProto(*options_.mounting_pose);
+    }
+    if (options_.detector) {
+      for (const FrameBox& box : options_.detector(frame)) {
+        v1::DetectedBox* b = out.add_boxes();
+        b->set_track_id(box.track_id);
+        b->set_score(box.score);
+        for (const auto& c : box.corners) {
+          v1::Point2* p = b->add_corners();
+          p->set_x(c[0]);
+          p->set_y(c[1]);
+        }
+      }
     }
     return out;
   };

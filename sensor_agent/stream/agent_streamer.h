@@ -15,6 +15,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "absl/status/status.h"
 #include "ave/net/tls.h"
@@ -22,6 +23,14 @@
 #include "sensor_agent/source/frame_source.h"
 
 namespace ave {
+
+// One tracked object in a frame: four corners clockwise from the top-left (pixels, origin at the
+// top-left pixel's corner), its stable track id and a score in [0, 1] (wire: ave.v1.DetectedBox).
+struct FrameBox {
+  uint32_t track_id = 0;
+  std::array<std::array<float, 2>, 4> corners{};
+  float score = 0;
+};
 
 struct AgentOptions {
   std::string server = "127.0.0.1:50051";
@@ -48,6 +57,9 @@ struct AgentOptions {
   // The sensor's clock (ns); capture stamps from the source are taken to be on it.
   std::function<int64_t()> clock;
   std::optional<Rigid3d> mounting_pose;  // used when the source knows no pose of its own
+  // Set: runs on every captured frame (the agent's detection and tracking, issue 6); the boxes it
+  // returns travel with that frame (and with its buffered metadata during an outage).
+  std::function<std::vector<FrameBox>(const CapturedFrame&)> detector;
 
   std::string Check() const;  // empty when usable, else names the field
 };

@@ -1,0 +1,162 @@
+#include "fusion_server/core/objects.h"
+
+#include <Eigen/Cholesky>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace ave {
+
+std::string ObjectOptions::Check() const {
+  if (!(gate_m > 0 && std::isfinite(gate_m))) return "gate_m must be finite and > 0";
+  if (!(gate_sigma > 0 && std::isfinite(gate_sigma))) return "gate_sigma must be finite and > 0";
+  if (!(forget_s > 0 && std::isfinite(forget_s))) return "forget_s must be finite and > 0";
+  if (!(process_speed_mps >= 0 && std::isfinite(process_speed_mps))) return "process_speed_mps must be >= 0";
+  if (max_path < 2) return "max_path must be >= 2";
+  if (!(path_step_m >= 0 && heading_step_m > 0)) return "path_step_m must be >= 0 and heading_step_m > 0";
+  return "";
+}
+
+ObjectFusion::ObjectFusion(ObjectOptions options) : options_(options) {
+  if (std::string why = options.Check(); !why.empty()) throw std::invalid_argument("ObjectOptions: " + why);
+}
+
+bool ObjectFusion::Within(const FusedObject& object, const Eigen::Vector3d& p, const Eigen::Matrix2d& cov) const {
+  const Eigen::Vector2d d = (p - object.position).head<2>();
+  if (!(d.norm() <= options_.gate_m)) return false;
+  const Eigen::Matrix2d s = object.covariance_xy + cov;
+  const Eigen::LDLT<Eigen::Matrix2d> ldlt(s);
+  if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) return true;  // metric gate only
+  return d.dot(ldlt.solve(d)) <= options_.gate_sigma * options_.gate_sigma;
+}
+
+void ObjectFusion::Update(FusedObject& o, const ObjectObservation& obs) {
+  const Placement& z = obs.placement;
+  const double dt = std::max(0.0, (obs.t_ns - o.last_seen_ns) * 1e-9);
+  // Predict: random walk in the ground plane.
+  Eigen::Matrix2d p = o.covariance_xy;
+  p.diagonal().array() += options_.process_speed_mps * options_.process_speed_mps * dt;
+  // Update (Joseph form), height taken from the newest contact (the terrain under it).
+  const Eigen::Matrix2d s = p + z.covariance_xy;
+  const Eigen::Matrix2d gain = s.ldlt().solve(p.transpose()).transpose();  // P S^-1 (S, P symmetric)
+  const Eigen::Vector2d innovation = (z.position - o.position).head<2>();
+  if (gain.allFinite()) {
+    o.position.head<2>() += gain * innovation;
+    const Eigen::Matrix2d ikh = Eigen::Matrix2d::Identity() - gain;
+    o.covariance_xy = ikh * p * ikh.transpose() + gain * z.covariance_xy * gain.transpose();
+    o.covariance_xy = 0.5 * (o.covariance_xy + o.covariance_xy.transpose()).eval();
+    o.covariance_xy.diagonal() = o.covariance_xy.diagonal().cwiseMax(1e-4);
+  }
+  o.position.z() = z.position.z();
+  o.size_m = o.size_m.isZero() ? z.size_m : (0.8 * o.size_m + 0.2 * z.size_m).eval();
+  ++o.kind_votes[static_cast<int>(z.kind)];
+  const int best = static_cast<int>(std::max_element(o.kind_votes, o.kind_votes + 3) - o.kind_votes);
+  o.kind = static_cast<ObjectKind>(best);
+  o.shape = o.kind == ObjectKind::kCar ? ObjectShape::kCuboid : ObjectShape::kBillboard;
+  if (o.kind == ObjectKind::kCar && o.size_m.y() < o.size_m.x()) std::swap(o.size_m.x(), o.size_m.y());
+  const Eigen::Vector2d moved = (o.position - o.heading_anchor).head<2>();
+  if (moved.norm() >= options_.heading_step_m) {
+    o.heading_rad = std::atan2(moved.y(), moved.x());
+    o.heading_anchor = o.position;
+  }
+  if (o.path.empty() || (o.position - o.path.back()).head<2>().norm() >= options_.path_step_m) {
+    o.path.push_back(o.position);
+    while (o.path.size() > options_.max_path) o.path.pop_front();
+  }
+  o.cameras[obs.camera_id] = {obs.track_id, obs.t_ns};
+  o.newest_camera = obs.camera_id;
+  o.last_seen_ns = std::max(o.last_seen_ns, obs.t_ns);
+}
+
+uint64_t ObjectFusion::Observe(const ObjectObservation& obs) {
+  const Placement& z = obs.placement;
+  if (!z.position.allFinite() || !z.covariance_xy.allFinite()) return 0;
+  // The object this camera's track is already tied to.
+  for (auto& [id, o] : objects_) {
+    auto it = o.cameras.find(obs.camera_id);
+    if (it != o.cameras.end() && it->second.first == obs.track_id) {
+      Update(o, obs);
+      return id;
+    }
+  }
+  // A new track: the nearest live object within the gate that this camera does not already hold.
+  FusedObject* best = nullptr;
+  double best_d = std::numeric_limits<double>::infinity();
+  const int64_t forget_ns = static_cast<int64_t>(options_.forget_s * 1e9);
+  for (auto& [id, o] : objects_) {
+    auto it = o.cameras.find(obs.camera_id);
+    if (it != o.cameras.end() && obs.t_ns - it->second.second < forget_ns) continue;
+    if (!Within(o, z.position, z.covariance_xy)) continue;
+    const double d = (z.position - o.position).head<2>().norm();
+    if (d < best_d) best_d = d, best = &o;
+  }
+  if (best) {
+    best->cameras.erase(obs.camera_id);
+    Update(*best, obs);
+    return best->id;
+  }
+  FusedObject o;
+  o.id = next_id_++;
+  o.position = z.position;
+  o.covariance_xy = z.covariance_xy;
+  o.size_m = z.size_m;
+  o.kind = z.kind;
+  o.shape = z.shape;
+  o.first_seen_ns = o.last_seen_ns = obs.t_ns;
+  o.heading_anchor = z.position;
+  o.path.push_back(z.position);
+  o.cameras[obs.camera_id] = {obs.track_id, obs.t_ns};
+  o.newest_camera = obs.camera_id;
+  ++o.kind_votes[static_cast<int>(z.kind)];
+  const uint64_t id = o.id;
+  objects_.emplace(id, std::move(o));
+  return id;
+}
+
+void ObjectFusion::Expire(int64_t now_ns) {
+  const int64_t forget_ns = static_cast<int64_t>(options_.forget_s * 1e9);
+  for (auto it = objects_.begin(); it != objects_.end();) {
+    FusedObject& o = it->second;
+    std::erase_if(o.cameras, [&](const auto& c) { return now_ns - c.second.second > forget_ns; });
+    it = o.cameras.empty() ? objects_.erase(it) : std::next(it);
+  }
+  // Merge objects seen by disjoint cameras that have come within the gate: the older id stays.
+  for (auto a = objects_.begin(); a != objects_.end(); ++a) {
+    for (auto b = std::next(a); b != objects_.end();) {
+      bool shared = false;
+      for (const auto& [cam, tie] : b->second.cameras) shared = shared || a->second.cameras.count(cam);
+      if (shared || !Within(a->second, b->second.position, b->second.covariance_xy)) {
+        ++b;
+        continue;
+      }
+      FusedObject& keep = a->second;
+      const FusedObject& gone = b->second;
+      const Eigen::Matrix2d s = keep.covariance_xy + gone.covariance_xy;
+      const Eigen::Matrix2d gain = s.ldlt().solve(keep.covariance_xy.transpose()).transpose();
+      if (gain.allFinite()) {
+        keep.position.head<2>() += gain * (gone.position - keep.position).head<2>();
+        keep.covariance_xy = (Eigen::Matrix2d::Identity() - gain) * keep.covariance_xy;
+        keep.covariance_xy = 0.5 * (keep.covariance_xy + keep.covariance_xy.transpose()).eval();
+        keep.covariance_xy.diagonal() = keep.covariance_xy.diagonal().cwiseMax(1e-4);
+      }
+      for (const auto& c : gone.cameras) keep.cameras.insert(c);
+      if (gone.last_seen_ns > keep.last_seen_ns) {
+        keep.last_seen_ns = gone.last_seen_ns;
+        keep.newest_camera = gone.newest_camera;
+      }
+      b = objects_.erase(b);
+    }
+  }
+}
+
+std::vector<const FusedObject*> ObjectFusion::Live(int64_t now_ns) const {
+  std::vector<const FusedObject*> out;
+  const int64_t forget_ns = static_cast<int64_t>(options_.forget_s * 1e9);
+  for (const auto& [id, o] : objects_) {
+    if (now_ns - o.last_seen_ns <= forget_ns) out.push_back(&o);
+  }
+  return out;
+}
+
+}  // namespace ave

@@ -1,0 +1,81 @@
+#pragma once
+// The server's moving objects (seed AVE §6.1, issue 6): ground-contact placements from every
+// camera fused into objects with one stable id each. Pure (no gRPC, no locking: SceneState holds
+// it under its mutex).
+//
+// Association: a (camera, track id) pair once tied to an object stays tied while the object
+// lives. A new pair joins the nearest live object that no other track of the same camera holds,
+// when its placement lies within the gate (Mahalanobis distance of the two uncertainties, and
+// metres); otherwise it starts a new object. Objects from different cameras that come within the
+// gate of each other are merged (the older id stays). Each object is a constant-position Kalman
+// filter in the ground plane (Joseph-form update, process noise for walking/driving speed); heading
+// comes from its motion, its path is the bounded history of fused positions.
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "fusion_server/core/placement.h"
+
+namespace ave {
+
+struct ObjectOptions {
+  double gate_m = 2.5;               // association / merge distance cap (metres, ground plane)
+  double gate_sigma = 3.5;           // and Mahalanobis cap
+  double forget_s = 2.0;             // an object unseen this long is dropped
+  double process_speed_mps = 2.0;    // random-walk process noise: variance grows speed^2 * dt
+  size_t max_path = 200;             // path points kept
+  double path_step_m = 0.25;         // a new path point after moving this far
+  double heading_step_m = 0.5;       // heading re-measured after moving this far
+
+  std::string Check() const;
+};
+
+struct ObjectObservation {
+  std::string camera_id;
+  uint32_t track_id = 0;
+  int64_t t_ns = 0;  // server clock
+  Placement placement;
+};
+
+struct FusedObject {
+  uint64_t id = 0;
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();
+  Eigen::Matrix2d covariance_xy = Eigen::Matrix2d::Identity();
+  Eigen::Vector3d size_m = Eigen::Vector3d::Zero();
+  double heading_rad = 0;
+  ObjectKind kind = ObjectKind::kUnknown;
+  ObjectShape shape = ObjectShape::kBillboard;
+  std::deque<Eigen::Vector3d> path;
+  std::map<std::string, std::pair<uint32_t, int64_t>> cameras;  // camera -> (track id, last seen ns)
+  std::string newest_camera;
+  int64_t first_seen_ns = 0, last_seen_ns = 0;
+  Eigen::Vector3d heading_anchor = Eigen::Vector3d::Zero();
+  int kind_votes[3] = {0, 0, 0};
+};
+
+class ObjectFusion {
+ public:
+  explicit ObjectFusion(ObjectOptions options = {});
+
+  // Folds one placement in; returns the id of the object it joined or started.
+  uint64_t Observe(const ObjectObservation& observation);
+  // Drops objects (and camera ties) unseen for forget_s before now_ns; merges objects within the gate.
+  void Expire(int64_t now_ns);
+  // Objects seen within forget_s of now_ns.
+  std::vector<const FusedObject*> Live(int64_t now_ns) const;
+  size_t size() const { return objects_.size(); }
+
+ private:
+  void Update(FusedObject& object, const ObjectObservation& observation);
+  bool Within(const FusedObject& object, const Eigen::Vector3d& p, const Eigen::Matrix2d& cov) const;
+  ObjectOptions options_;
+  std::map<uint64_t, FusedObject> objects_;
+  uint64_t next_id_ = 1;
+};
+
+}  // namespace ave
