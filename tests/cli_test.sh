@@ -5,8 +5,8 @@ set -u
 bin=$1
 fail=0
 # Each executable with its required arguments, so the bad flag is the only fault.
-declare -A args=([ave-server]="" [ave-agent]="--camera c --source sim:campus#cam1" [ave-viewer]="" [ave-admin]="list" [ave-sim]="camera --scenario minimal --camera c --out /tmp/ave_cli_sim" [ave-bench]="sim" [ave-loadgen]="")
-for exe in ave-server ave-agent ave-viewer ave-admin ave-sim ave-bench ave-loadgen; do
+declare -A args=([ave-server]="" [ave-agent]="--camera c --source sim:campus#cam1" [ave-viewer]="" [ave-admin]="list" [ave-sim]="camera --scenario minimal --camera c --out /tmp/ave_cli_sim" [ave-bench]="sim" [ave-loadgen]="" [ave-model]="classify --input /x.las --out /tmp/ave_cli_y.las" [ave-calibrate]="--images /x/*.jpg --board 9x6 --square 0.025 --out /tmp/ave_cli_k.yaml")
+for exe in ave-server ave-agent ave-viewer ave-admin ave-sim ave-bench ave-loadgen ave-model ave-calibrate; do
   if ! "$bin/$exe" --help >/tmp/ave_cli_help.$$ 2>&1; then echo "FAIL $exe --help exited non-zero"; fail=1; fi
   grep -q -- "--" /tmp/ave_cli_help.$$ || { echo "FAIL $exe --help printed no options"; fail=1; }
   # shellcheck disable=SC2086
@@ -24,5 +24,11 @@ out=$("$bin/ave-agent" --camera c --source ftp://x 2>&1); rc=$?
 if [ $rc -eq 0 ] || ! grep -q "unknown scheme" <<<"$out"; then echo "FAIL ave-agent bad source: rc=$rc $out"; fail=1; fi
 out=$("$bin/ave-server" --listen 127.0.0.1:0 --store /nonexistent-dir/x.db --admin-token t 2>&1); rc=$?
 if [ $rc -eq 0 ] || ! grep -q "/nonexistent-dir/x.db" <<<"$out"; then echo "FAIL ave-server bad store: rc=$rc $out"; fail=1; fi
+out=$("$bin/ave-viewer" --headless 2>&1); rc=$?
+if [ $rc -ne 2 ] || ! grep -q -- "--snapshot" <<<"$out"; then echo "FAIL ave-viewer --headless without output: rc=$rc $out"; fail=1; fi
+out=$("$bin/ave-model" classify --input /nonexistent-dir/in.las --out /tmp/ave_cli_out.las 2>&1); rc=$?
+if [ $rc -eq 0 ] || ! grep -q "/nonexistent-dir/in.las" <<<"$out"; then echo "FAIL ave-model bad input: rc=$rc $out"; fail=1; fi
+out=$("$bin/ave-calibrate" --images '/nonexistent-dir/*.jpg' --board 9x6 --square 0.025 --out /tmp/ave_cli_k.yaml 2>&1); rc=$?
+if [ $rc -eq 0 ] || ! grep -q "nonexistent-dir" <<<"$out"; then echo "FAIL ave-calibrate no images: rc=$rc $out"; fail=1; fi
 [ "$fail" = 0 ] && echo "cli: all checks passed"
 exit $fail

@@ -11,6 +11,7 @@
 
 #include "fusion_server/admin/admin_client.h"
 #include "fusion_server/service/server.h"
+#include "fusion_server/service/test_fixtures.h"
 #include "model_store/geometry/raycast.h"
 #include "model_store/scene/campus.h"
 #include "sensor_agent/stream/agent_streamer.h"
@@ -67,12 +68,7 @@ class EndToEnd : public ::testing::Test {
   void SetUp() override {
     dir_ = std::filesystem::temp_directory_path() / ("ave_e2e_" + std::to_string(::getpid()));
     std::filesystem::create_directories(dir_);
-    ServerOptions options;
-    options.listen_address = "127.0.0.1:0";
-    options.store_path = (dir_ / "ave.db").string();
-    options.sensor_token = kSensor;
-    options.viewer_token = kViewer;
-    options.admin_token = kAdmin;
+    ServerOptions options = fixtures::LoopbackServer((dir_ / "ave.db").string(), kSensor, kViewer, kAdmin);
     auto server = FusionServer::Start(options);
     ASSERT_TRUE(server.ok()) << server.status();
     server_ = std::move(*server);
@@ -240,11 +236,7 @@ TEST_F(EndToEnd, VideoLandsWhereCameraOneSeesAndNotBehindBuildings) {
 TEST(AgentReconnect, SurvivesServerRestart) {
   const auto dir = std::filesystem::temp_directory_path() / ("ave_reconnect_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
-  ServerOptions options;
-  options.listen_address = "127.0.0.1:0";
-  options.store_path = (dir / "ave.db").string();
-  options.sensor_token = kSensor;
-  options.admin_token = kAdmin;
+  ServerOptions options = fixtures::LoopbackServer((dir / "ave.db").string(), kSensor, "", kAdmin);
   options.campus_grid_m = 8;
   auto first = FusionServer::Start(options);
   ASSERT_TRUE(first.ok()) << first.status();

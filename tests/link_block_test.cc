@@ -20,6 +20,7 @@
 
 #include "fusion_server/admin/admin_client.h"
 #include "fusion_server/service/server.h"
+#include "fusion_server/service/test_fixtures.h"
 #include "model_store/common/log.h"
 #include "model_store/scene/campus.h"
 #include "sensor_agent/stream/agent_streamer.h"
@@ -118,11 +119,7 @@ class BlackholeProxy {
 TEST(LinkBlock, AgentDetectsASilentLinkAndIsBackWithinFiveSecondsOfItsReturn) {
   const auto dir = std::filesystem::temp_directory_path() / ("ave_link_block_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
-  ServerOptions options;
-  options.listen_address = "127.0.0.1:0";
-  options.store_path = (dir / "ave.db").string();
-  options.sensor_token = "s";
-  options.admin_token = "a";
+  ServerOptions options = fixtures::LoopbackServer((dir / "ave.db").string(), "s", "", "a");
   options.campus_grid_m = 8;
   auto server = FusionServer::Start(options);
   ASSERT_TRUE(server.ok()) << server.status();

@@ -70,8 +70,44 @@ absl::Status SceneState::AcceptFrame(const std::string& id, std::shared_ptr<cons
   ++it->second.accepted;
   it->second.latest = std::move(frame);
   it->second.latest_received_ns = received_ns;
+  if (terrain_) PlaceBoxesLocked(it->second, *it->second.latest, id);
   BumpLocked();
   return absl::OkStatus();
+}
+
+void SceneState::SetStaticModel(const TriangleMesh& mesh) {
+  auto terrain = std::make_shared<const TerrainModel>(mesh);
+  std::lock_guard lock(mu_);
+  terrain_ = std::move(terrain);
+}
+
+size_t SceneState::ObjectCount() const {
+  std::lock_guard lock(mu_);
+  return objects_.size();
+}
+
+void SceneState::PlaceBoxesLocked(const Live& live, const v1::SensorFrame& frame, const std::string& id) {
+  const int64_t t_ns = frame.capture_time_ns() + frame.clock_offset_ns();
+  if (frame.boxes_size() > 0) {
+    const PinholeIntrinsics k = live.stream_intrinsics.value_or(live.entry.intrinsics);
+    const Rigid3d pose = frame.has_pose() ? FromProto(frame.pose()) : live.entry.mounting_pose;
+    Eigen::Matrix<double, 6, 6> covariance;
+    const bool has_covariance = frame.has_pose() && frame.pose().covariance_size() == 36;
+    if (has_covariance) {
+      for (int i = 0; i < 36; ++i) covariance(i / 6, i % 6) = frame.pose().covariance(i);
+    }
+    for (const v1::DetectedBox& box : frame.boxes()) {
+      std::array<double, 4> b = {1e300, 1e300, -1e300, -1e300};
+      for (const v1::Point2& c : box.corners()) {
+        b = {std::min<double>(b[0], c.x()), std::min<double>(b[1], c.y()), std::max<double>(b[2], c.x()),
+             std::max<double>(b[3], c.y())};
+      }
+      if (auto placed = PlaceBox(*terrain_, k, pose, has_covariance ? &covariance : nullptr, b)) {
+        objects_.Observe({id, box.track_id(), t_ns, *placed});
+      }
+    }
+  }
+  objects_.Expire(t_ns);
 }
 
 uint64_t SceneState::AcceptedCount(const std::string& id) const {
@@ -126,6 +162,7 @@ v1::SceneUpdate SceneState::BuildUpdate(const std::vector<std::string>& camera_i
   update.set_server_time_ns(now_ns);
   cursor.last_sent.clear();
   cursor.last_skipped = 0;
+  cursor.last_selected = 0;
   auto wanted = [&](const std::string& id) {
     return camera_ids.empty() || std::find(camera_ids.begin(), camera_ids.end(), id) != camera_ids.end();
   };
@@ -155,6 +192,12 @@ v1::SceneUpdate SceneState::BuildUpdate(const std::vector<std::string>& camera_i
     } else {
       cam->set_status(v1::CAMERA_STATUS_LOST);
     }
+    const bool in_view =
+        cursor.views.empty() ||
+        AnyIntersects(CameraVolume(k, FromProto(cam->pose()), options_.near_m, options_.far_m, cursor.selection_floor_z),
+                      cursor.views);
+    cursor.last_selected += in_view;
+    if (live.latest && !in_view) cursor.sent_accepted[id] = live.accepted;  // out of view: not skipped
     if (live.latest) {
       const int64_t capture_server_ns = live.latest->capture_time_ns() + live.latest->clock_offset_ns();
       cam->set_frame_capture_time_ns(live.latest->capture_time_ns());
@@ -162,7 +205,7 @@ v1::SceneUpdate SceneState::BuildUpdate(const std::vector<std::string>& camera_i
       cam->set_frame_sequence(live.latest->sequence());
       *cam->mutable_boxes() = live.latest->boxes();
       uint64_t& sent = cursor.sent_sequence[id];
-      if (include_jpeg && live.latest->sequence() != sent && !live.latest->jpeg().empty()) {
+      if (include_jpeg && in_view && live.latest->sequence() != sent && !live.latest->jpeg().empty()) {
         cam->set_jpeg(live.latest->jpeg());
         sent = live.latest->sequence();
         auto [slot, first] = cursor.sent_accepted.try_emplace(id, live.accepted);
@@ -187,6 +230,30 @@ v1::SceneUpdate SceneState::BuildUpdate(const std::vector<std::string>& camera_i
     }
   }
   cursor.known_cameras = std::move(present);
+  for (const FusedObject* o : objects_.Live(now_ns)) {
+    if (!std::any_of(o->cameras.begin(), o->cameras.end(), [&](const auto& c) { return wanted(c.first); })) continue;
+    v1::DynamicObject* out = update.add_objects();
+    out->set_object_id(o->id);
+    out->mutable_position()->set_x(o->position.x());
+    out->mutable_position()->set_y(o->position.y());
+    out->mutable_position()->set_z(o->position.z());
+    out->mutable_size()->set_x(o->size_m.x());
+    out->mutable_size()->set_y(o->size_m.y());
+    out->mutable_size()->set_z(o->size_m.z());
+    out->set_heading_rad(static_cast<float>(o->heading_rad));
+    out->set_source_camera_id(o->newest_camera);
+    out->set_model(static_cast<v1::ObjectModel>(o->shape));
+    out->add_position_covariance(static_cast<float>(o->covariance_xy(0, 0)));
+    out->add_position_covariance(static_cast<float>(o->covariance_xy(0, 1)));
+    out->add_position_covariance(static_cast<float>(o->covariance_xy(1, 1)));
+    for (const Eigen::Vector3d& p : o->path) {
+      v1::Vec3* q = out->add_path();
+      q->set_x(p.x()), q->set_y(p.y()), q->set_z(p.z());
+    }
+    for (const auto& c : o->cameras) out->add_camera_ids(c.first);
+    out->set_last_seen_ns(o->last_seen_ns);
+    out->set_kind(static_cast<uint32_t>(o->kind));
+  }
   return update;
 }
 

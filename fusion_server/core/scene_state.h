@@ -7,6 +7,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
+#include <limits>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -16,6 +17,9 @@
 #include <vector>
 
 #include "absl/status/status.h"
+#include "fusion_server/core/objects.h"
+#include "fusion_server/core/placement.h"
+#include "fusion_server/core/view_select.h"
 #include "model_store/geometry/camera.h"
 #include "model_store/geometry/rigid3.h"
 #include "ave/v1/ave.pb.h"
@@ -49,6 +53,13 @@ struct ViewerCursor {
   // Filled by BuildUpdate for the JPEGs it put in the update: (received_ns, capture on the server clock).
   std::vector<std::pair<int64_t, int64_t>> last_sent;
   uint64_t last_skipped = 0;  // frames skipped by the last BuildUpdate
+  // Data selection (issue 7, view_select.h): when `views` is non-empty, a camera's JPEG goes out
+  // only while its viewing volume, cut at selection_floor_z (local frame), intersects one of them;
+  // poses and status go out for every camera. Frames that arrive while a camera is out of view are
+  // not counted as skipped. last_selected: cameras whose frames the last BuildUpdate could send.
+  std::vector<ConvexVolume> views;
+  double selection_floor_z = -std::numeric_limits<double>::infinity();
+  size_t last_selected = 0;
 };
 
 class SceneState {
@@ -76,6 +87,12 @@ class SceneState {
 
   // The latest accepted frame of a camera, if any.
   std::shared_ptr<const v1::SensorFrame> LatestFrame(const std::string& id) const;
+
+  // Moving objects (issue 6): with a static model set, the boxes of every accepted frame are placed
+  // on its terrain (placement.h) and fused across cameras (objects.h); BuildUpdate sends the live
+  // objects seen by the requested cameras. Without one, boxes are forwarded but not placed.
+  void SetStaticModel(const TriangleMesh& mesh);
+  size_t ObjectCount() const;
 
   // Monotonic counter bumped by every change; WaitForChange returns true when it moved past `seen`.
   uint64_t version() const;
@@ -106,6 +123,9 @@ class SceneState {
   mutable std::mutex mu_;
   mutable std::condition_variable changed_;
   std::map<std::string, Live> cameras_;
+  std::shared_ptr<const TerrainModel> terrain_;
+  ObjectFusion objects_;
+  void PlaceBoxesLocked(const Live& live, const v1::SensorFrame& frame, const std::string& id);
   uint64_t version_ = 1;
   bool shut_down_ = false;
 };

@@ -59,11 +59,8 @@ class Fixture : public ::testing::Test {
     dir_ = std::filesystem::temp_directory_path() /
            ("ave_roles_test_" + std::to_string(::getpid()) + "_" + std::to_string(counter_++));
     std::filesystem::create_directories(dir_);
-    ServerOptions options;
-    options.listen_address = "127.0.0.1:0";
-    options.store_path = (dir_ / "ave.db").string();
-    options.admin_token = kAdmin;
-    options.viewer_token = kViewer;  // no bootstrap sensor token: sensors use issued, per-camera tokens
+    // No bootstrap sensor token: sensors use issued, per-camera tokens.
+    ServerOptions options = fixtures::LoopbackServer((dir_ / "ave.db").string(), "", kViewer, kAdmin);
     options.tls = tls;
     options.sensor_requires_client_cert = sensor_cert;
     options.metrics_listen = "127.0.0.1:0";
@@ -249,10 +246,7 @@ TEST_F(Roles, TokensAreStoredHashedSurviveRestartAndRevocationBites) {
     EXPECT_EQ(bytes.str().find(sensor), std::string::npos) << suffix;
   }
   // After a restart the issued token still works (loaded from the store), until revoked.
-  ServerOptions options;
-  options.listen_address = "127.0.0.1:0";
-  options.store_path = store_path;
-  options.admin_token = kAdmin;
+  ServerOptions options = fixtures::LoopbackServer(store_path, "", "", kAdmin);
   options.campus_grid_m = 8;
   auto server = FusionServer::Start(options);
   ASSERT_TRUE(server.ok()) << server.status();

@@ -1,4 +1,6 @@
 #include <algorithm>
+#include <cmath>
+#include <limits>
 #include <thread>
 
 #include "absl/strings/str_cat.h"
@@ -7,6 +9,55 @@
 #include "model_store/common/log.h"
 
 namespace ave::internal {
+namespace {
+
+// Data selection (issue 7): the request's view frusta as volumes in the server's local frame
+// (the static model's), cut at the model's floor.
+grpc::Status SelectionViews(const v1::SubscribeRequest& request, const std::vector<v1::StaticModelChunk>& chunks,
+                                double floor_z, ViewerCursor& cursor) {
+  if (request.views_size() > 16) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "views: at most 16 view frusta per subscription");
+  }
+  const Eigen::Vector3d model_origin =
+      chunks.empty() ? Eigen::Vector3d::Zero()
+                     : Eigen::Vector3d(chunks[0].origin().x(), chunks[0].origin().y(), chunks[0].origin().z());
+  cursor.selection_floor_z = floor_z;
+  for (int i = 0; i < request.views_size(); ++i) {
+    const v1::ViewFrustum& f = request.views(i);
+    if (f.view_projection_size() != 16) {
+      return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                          absl::StrCat("views[", i, "].view_projection: 16 floats expected, got ", f.view_projection_size()));
+    }
+    Eigen::Matrix4d clip_from_view_local;
+    for (int k = 0; k < 16; ++k) clip_from_view_local(k % 4, k / 4) = f.view_projection(k);
+    // The viewer's local frame is relative to its origin; ours to the model's (both usually equal).
+    // An origin of exactly zero means "your local frame" (a viewer that never fetched the model).
+    const Eigen::Vector3d view_origin(f.origin_x(), f.origin_y(), f.origin_z());
+    const Eigen::Vector3d shift =
+        chunks.empty() || view_origin.isZero(0) ? Eigen::Vector3d::Zero() : Eigen::Vector3d(view_origin - model_origin);
+    if (!shift.allFinite()) {
+      return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, absl::StrCat("views[", i, "]: origin is not finite"));
+    }
+    Eigen::Matrix4d view_local_from_local = Eigen::Matrix4d::Identity();
+    view_local_from_local.topRightCorner<3, 1>() = -shift;
+    absl::StatusOr<ConvexVolume> volume =
+        FrustumFromClip(clip_from_view_local * view_local_from_local, kDefaultSelectionDepthM, floor_z);
+    if (!volume.ok()) {
+      return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, absl::StrCat("views[", i, "]: ", volume.status().message()));
+    }
+    cursor.views.push_back(*std::move(volume));
+  }
+  return grpc::Status::OK;
+}
+
+}  // namespace
+
+double SceneServiceImpl::ModelFloorZ(const std::vector<v1::StaticModelChunk>& chunks) {
+  double floor_z = std::numeric_limits<double>::infinity();
+  for (const auto& chunk : chunks)
+    for (int i = 2; i < chunk.positions_size(); i += 3) floor_z = std::min<double>(floor_z, chunk.positions(i));
+  return std::isfinite(floor_z) ? floor_z - 0.01 : -std::numeric_limits<double>::infinity();
+}
 
 grpc::Status SceneServiceImpl::Subscribe(grpc::ServerContext* context, const v1::SubscribeRequest* request,
                                          grpc::ServerWriter<v1::SceneUpdate>* writer) {
@@ -26,18 +77,19 @@ grpc::Status SceneServiceImpl::Subscribe(grpc::ServerContext* context, const v1:
                           "camera_ids: '" + id.substr(0, 80) + "' is not a camera id ([A-Za-z0-9_.-], 1..64)");
     }
   }
+  ViewerCursor cursor;
+  if (grpc::Status s = SelectionViews(*request, chunks_, floor_z_, cursor); !s.ok()) return s;
   const std::vector<std::string> camera_ids(request->camera_ids().begin(), request->camera_ids().end());
   const float rate_hz = std::min(options_.max_viewer_rate_hz,
                                  request->max_rate_hz() > 0 ? request->max_rate_hz() : options_.default_viewer_rate_hz);
   const auto min_interval = std::chrono::microseconds(static_cast<int64_t>(1e6 / rate_hz));
   const std::string viewer = request->viewer_id().empty() ? context->peer() : request->viewer_id();
   AVE_LOG(INFO) << "viewer '" << viewer << "' subscribed (" << (camera_ids.empty() ? std::string("all") : absl::StrCat(camera_ids.size()))
-                << " cameras, " << rate_hz << " Hz)";
+                << " cameras, " << rate_hz << " Hz, " << cursor.views.size() << " view frusta)";
 
   ServerMetrics& metrics = shared_.metrics;
   ++metrics.viewers_connected;
   int64_t queue_depth = 0;  // this viewer's share of metrics.viewer_queue_depth
-  ViewerCursor cursor;
   uint64_t seen = 0;
   uint64_t sent = 0;
   uint64_t skipped = 0;

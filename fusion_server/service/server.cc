@@ -81,6 +81,7 @@ absl::StatusOr<std::unique_ptr<FusionServer>> FusionServer::Start(const ServerOp
     const store::StaticModelRecord& record = **model;
     impl->model_version = static_cast<uint64_t>(record.version);
     chunks = internal::ChunkMesh(record.mesh, impl->model_version, record.name);
+    impl->state.SetStaticModel(record.mesh);  // moving objects are placed on its terrain (issue 6)
     AVE_LOG(INFO) << "static model '" << record.name << "' version " << record.version << ": "
                   << record.mesh.TriangleCount() << " triangles in " << chunks.size() << " chunks";
   } else {

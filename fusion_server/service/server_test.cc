@@ -32,12 +32,7 @@ class ServerTest : public ::testing::Test {
   void SetUp() override {
     dir_ = std::filesystem::temp_directory_path() / ("ave_server_test_" + std::to_string(::getpid()));
     std::filesystem::create_directories(dir_);
-    ServerOptions options;
-    options.listen_address = "127.0.0.1:0";
-    options.store_path = (dir_ / "ave.db").string();
-    options.sensor_token = kSensor;
-    options.viewer_token = kViewer;
-    options.admin_token = kAdmin;
+    ServerOptions options = fixtures::LoopbackServer((dir_ / "ave.db").string(), kSensor, kViewer, kAdmin);
     options.frame_limits.max_jpeg_bytes = 1 << 20;
     options.max_message_bytes = 4 << 20;
     options.campus_grid_m = 8;
@@ -220,10 +215,7 @@ TEST_F(ServerTest, ViewerGetsStaticModelAndLatestFrames) {
 TEST_F(ServerTest, RestartReloadsCamerasFromTheStore) {
   const std::string path = (dir_ / "ave.db").string();
   server_.reset();
-  ServerOptions options;
-  options.listen_address = "127.0.0.1:0";
-  options.store_path = path;
-  options.sensor_token = kSensor;
+  ServerOptions options = fixtures::LoopbackServer(path, kSensor, "", "");
   auto server = FusionServer::Start(options);
   ASSERT_TRUE(server.ok()) << server.status();
   EXPECT_TRUE((*server)->state().FindCamera("a").has_value());

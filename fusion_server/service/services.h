@@ -55,7 +55,8 @@ class SensorServiceImpl final : public v1::SensorService::Service {
 class SceneServiceImpl final : public v1::SceneService::Service {
  public:
   SceneServiceImpl(ServerShared& shared, std::vector<v1::StaticModelChunk> chunks)
-      : shared_(shared), options_(shared.options), state_(shared.state), chunks_(std::move(chunks)) {}
+      : shared_(shared), options_(shared.options), state_(shared.state), chunks_(std::move(chunks)),
+        floor_z_(ModelFloorZ(chunks_)) {}
   grpc::Status Subscribe(grpc::ServerContext* context, const v1::SubscribeRequest* request,
                          grpc::ServerWriter<v1::SceneUpdate>* writer) override;
   grpc::Status GetStaticModel(grpc::ServerContext* context, const v1::StaticModelRequest* request,
@@ -66,6 +67,9 @@ class SceneServiceImpl final : public v1::SceneService::Service {
   const ServerOptions& options_;
   SceneState& state_;
   const std::vector<v1::StaticModelChunk> chunks_;
+  // Data selection (issue 7): the static model's lowest z (local frame), -inf without a model.
+  static double ModelFloorZ(const std::vector<v1::StaticModelChunk>& chunks);
+  const double floor_z_;
 };
 
 class AdminServiceImpl final : public v1::AdminService::Service {

@@ -10,8 +10,22 @@
 
 #include "ave/v1/ave.grpc.pb.h"
 #include "fusion_server/core/convert.h"
+#include "fusion_server/service/server.h"
 
 namespace ave::fixtures {
+
+// A server on a free loopback port with its store at `store_path` and the given bootstrap tokens
+// (empty = none): the start every service and end-to-end test shares.
+inline ServerOptions LoopbackServer(const std::string& store_path, const std::string& sensor_token,
+                                    const std::string& viewer_token, const std::string& admin_token) {
+  ServerOptions options;
+  options.listen_address = "127.0.0.1:0";
+  options.store_path = store_path;
+  options.sensor_token = sensor_token;
+  options.viewer_token = viewer_token;
+  options.admin_token = admin_token;
+  return options;
+}
 
 // A real, decodable JPEG of the given size.
 inline std::string Jpeg(int w, int h) {

@@ -12,6 +12,27 @@ using Runner = std::function<int()>;
 // `ave-bench sim`: simulated campus camera video, per-stage cost (sim_bench.cc).
 Runner AddSimBench(CLI::App& sub);
 
+// `ave-bench pose`: backpack-camera misregistration per pose mode vs time per frame (pose_bench.cc).
+Runner AddPoseBench(CLI::App& sub);
+
+// `ave-bench detect`: detection/tracking accuracy per background model vs fps, next to MOG2 (detect_bench.cc).
+Runner AddDetectBench(CLI::App& sub);
+
+// `ave-bench render`: quad-view frame time vs projected cameras and shadow-map size, visibility
+// error vs ray-cast truth (render_bench.cc).
+Runner AddRenderBench(CLI::App& sub);
+
+// `ave-bench model` (issue 4): static model from airborne LiDAR, accuracy vs resolution, filter and cost.
+Runner AddModelBench(CLI::App& sub);
+
+// `ave-bench select` (issue 7): data selection, streams and bytes a viewer receives with its view
+// frusta vs without, next to ray-cast truth; server cost of the frustum test (select_bench.cc).
+Runner AddSelectBench(CLI::App& sub);
+
+// `ave-bench environment` (issue 4): i4D environment from a rotating LiDAR, time per stage vs
+// frames accumulated, wall/vegetation accuracy, RANSAC and HoughLinesP peers (environment_bench.cc).
+Runner AddEnvironmentBench(CLI::App& sub);
+
 // Pins the process to one CPU and keeps OpenCV single-threaded, so figures are per core.
 void UseOneCore();
 

@@ -13,6 +13,12 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   std::map<std::string, ave::bench::Runner> runners;
   runners["sim"] = ave::bench::AddSimBench(*app.add_subcommand("sim", "simulated camera video: time per stage and effect vs real time"));
+  runners["pose"] = ave::bench::AddPoseBench(*app.add_subcommand("pose", "camera pose: misregistration in px per mode vs ms per frame"));
+  runners["detect"] = ave::bench::AddDetectBench(*app.add_subcommand("detect", "moving objects: MOTA, 3D error per background model vs fps, next to MOG2"));
+  runners["render"] = ave::bench::AddRenderBench(*app.add_subcommand("render", "renderer: quad-view ms per frame vs projected cameras, shadow-map size vs visibility error"));
+  runners["model"] = ave::bench::AddModelBench(*app.add_subcommand("model", "static model from LiDAR: terrain/ground/building accuracy vs resolution, filter, time, memory"));
+  runners["select"] = ave::bench::AddSelectBench(*app.add_subcommand("select", "data selection: streams and kB/s a viewer receives with its view frusta vs all, server cost"));
+  runners["environment"] = ave::bench::AddEnvironmentBench(*app.add_subcommand("environment", "i4D environment from a rotating LiDAR: ms per stage vs frames, wall and vegetation accuracy"));
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-bench")) return *exit_code;
   for (auto& [name, run] : runners) {
     if (app.got_subcommand(name)) return run();
