@@ -191,6 +191,17 @@ void Map::RequirePositive(const char* key, double value) const {
 void Map::RequireNonNegative(const char* key, double value) const {
   if (!(value >= 0)) Fail(Has(key) ? node_[key] : node_, Field(key), "must be >= 0");
 }
+double Map::NumberIn(const char* key, double fallback, double lo, double hi) const {
+  const double value = NumberOr(key, fallback);
+  RequireRange(key, value, lo, hi);
+  return value;
+}
+double Map::PositiveUpTo(const char* key, double fallback, double hi) const {
+  const double value = NumberOr(key, fallback);
+  RequirePositive(key, value);
+  RequireRange(key, value, 0, hi);
+  return value;
+}
 void Map::RequireRange(const char* key, double value, double lo, double hi) const {
   if (!(value >= lo && value <= hi)) {
     std::ostringstream os;
@@ -384,13 +395,9 @@ CameraSpec ParseCamera(const Map& m, const SyntheticCampus& campus, size_t index
     p.AllowOnly({"waypoints", "speed_mps", "height_m", "pitch_deg"});
     CameraPath path;
     path.waypoints_m = p.Points("waypoints", 2);
-    path.speed_mps = p.NumberOr("speed_mps", path.speed_mps);
-    path.height_m = p.NumberOr("height_m", path.height_m);
-    path.pitch_deg = p.NumberOr("pitch_deg", path.pitch_deg);
-    p.RequirePositive("speed_mps", path.speed_mps);
-    p.RequireRange("speed_mps", path.speed_mps, 0, 100);
-    p.RequireRange("height_m", path.height_m, 0.1, 500);
-    p.RequireRange("pitch_deg", path.pitch_deg, -89, 89);
+    path.speed_mps = p.PositiveUpTo("speed_mps", path.speed_mps, 100);
+    path.height_m = p.NumberIn("height_m", path.height_m, 0.1, 500);
+    path.pitch_deg = p.NumberIn("pitch_deg", path.pitch_deg, -89, 89);
     double length = 0;
     for (size_t i = 0; i + 1 < path.waypoints_m.size(); ++i) length += (path.waypoints_m[i + 1] - path.waypoints_m[i]).norm();
     if (!(length > 0)) Fail(p.Get("waypoints"), p.Field("waypoints"), "has zero length");

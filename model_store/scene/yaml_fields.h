@@ -68,6 +68,10 @@ class Map {
   void RequirePositive(const char* key, double value) const;
   void RequireNonNegative(const char* key, double value) const;
   void RequireRange(const char* key, double value, double lo, double hi) const;
+  // The common numeric field in one call: NumberOr, then RequireRange (NumberIn), or
+  // RequirePositive and RequireRange(0, hi) (PositiveUpTo).
+  double NumberIn(const char* key, double fallback, double lo, double hi) const;
+  double PositiveUpTo(const char* key, double fallback, double hi) const;
 
  private:
   YAML::Node node_;
