@@ -77,6 +77,10 @@ grpc::Status SceneServiceImpl::Subscribe(grpc::ServerContext* context, const v1:
                           "camera_ids: '" + id.substr(0, 80) + "' is not a camera id ([A-Za-z0-9_.-], 1..64)");
     }
   }
+  // A rate near zero would overflow the update interval (found by ave_fuzz_grpc_services).
+  if (const float r = request->max_rate_hz(); !(std::isfinite(r) && (r == 0 || r >= 0.1f))) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "max_rate_hz: must be 0 (server default) or at least 0.1 Hz");
+  }
   ViewerCursor cursor;
   if (grpc::Status s = SelectionViews(*request, chunks_, floor_z_, cursor); !s.ok()) return s;
   const std::vector<std::string> camera_ids(request->camera_ids().begin(), request->camera_ids().end());

@@ -210,6 +210,18 @@ TEST_F(ServerTest, ViewerGetsStaticModelAndLatestFrames) {
   auto refused = scene_->Subscribe(&bad, request);
   EXPECT_FALSE(refused->Read(&update));
   EXPECT_EQ(refused->Finish().error_code(), grpc::StatusCode::UNAUTHENTICATED);
+
+  // A rate near zero (or not finite) is refused by name: it once overflowed the update interval.
+  for (float rate : {1e-30f, -1.0f, NAN, INFINITY}) {
+    grpc::ClientContext slow;
+    slow.AddMetadata("authorization", std::string("Bearer ") + kViewer);
+    request.set_max_rate_hz(rate);
+    auto reader_slow = scene_->Subscribe(&slow, request);
+    EXPECT_FALSE(reader_slow->Read(&update));
+    const grpc::Status s = reader_slow->Finish();
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << rate;
+    EXPECT_THAT(s.error_message(), HasSubstr("max_rate_hz")) << rate;
+  }
 }
 
 TEST_F(ServerTest, RestartReloadsCamerasFromTheStore) {
