@@ -468,7 +468,7 @@ int main(int argc, char** argv) {
       m.mutable_hello()->set_token(o.sensor_token);
       *m.mutable_hello()->mutable_intrinsics() = ave::ToProto(intrinsics);
       m.mutable_hello()->set_software_version("ave-loadgen");
-      if (!stream->Write(m)) return fail("hello not sent");
+      if (!stream->Write(m)) return fail("hello not sent: " + stream->Finish().error_message());
       std::thread reader([&] {
         ave::v1::SensorAck ack;
         while (stream->Read(&ack)) {

@@ -69,16 +69,30 @@ void ObjectFusion::Update(FusedObject& o, const ObjectObservation& obs) {
   o.last_seen_ns = std::max(o.last_seen_ns, obs.t_ns);
 }
 
+void ObjectFusion::Retie(const std::string& camera, uint64_t from, uint64_t to) {
+  for (auto it = ties_.lower_bound({camera, 0, 0}); it != ties_.end() && std::get<0>(it->first) == camera;) {
+    if (it->second != from) {
+      ++it;
+    } else if (to != 0) {
+      (it++)->second = to;
+    } else {
+      it = ties_.erase(it);
+    }
+  }
+}
+
 uint64_t ObjectFusion::Observe(const ObjectObservation& obs) {
   const Placement& z = obs.placement;
   if (!z.position.allFinite() || !z.covariance_xy.allFinite()) return 0;
-  // The object this camera's track is already tied to.
-  for (auto& [id, o] : objects_) {
-    auto it = o.cameras.find(obs.camera_id);
-    if (it != o.cameras.end() && it->second.first == obs.track_id) {
-      Update(o, obs);
-      return id;
+  // The object this camera's track (of this stream session) is already tied to.
+  const TrackKey key{obs.camera_id, obs.session, obs.track_id};
+  if (auto tie = ties_.find(key); tie != ties_.end()) {
+    auto it = objects_.find(tie->second);
+    if (it != objects_.end()) {
+      Update(it->second, obs);
+      return it->first;
     }
+    ties_.erase(tie);
   }
   // A new track: the nearest live object within the gate that this camera does not already hold.
   FusedObject* best = nullptr;
@@ -93,7 +107,9 @@ uint64_t ObjectFusion::Observe(const ObjectObservation& obs) {
   }
   if (best) {
     best->cameras.erase(obs.camera_id);
+    Retie(obs.camera_id, best->id, 0);
     Update(*best, obs);
+    ties_[key] = best->id;
     return best->id;
   }
   FusedObject o;
@@ -111,6 +127,7 @@ uint64_t ObjectFusion::Observe(const ObjectObservation& obs) {
   ++o.kind_votes[static_cast<int>(z.kind)];
   const uint64_t id = o.id;
   objects_.emplace(id, std::move(o));
+  ties_[key] = id;
   return id;
 }
 
@@ -118,35 +135,59 @@ void ObjectFusion::Expire(int64_t now_ns) {
   const int64_t forget_ns = static_cast<int64_t>(options_.forget_s * 1e9);
   for (auto it = objects_.begin(); it != objects_.end();) {
     FusedObject& o = it->second;
-    std::erase_if(o.cameras, [&](const auto& c) { return now_ns - c.second.second > forget_ns; });
+    for (auto c = o.cameras.begin(); c != o.cameras.end();) {
+      if (now_ns - c->second.second <= forget_ns) {
+        ++c;
+        continue;
+      }
+      Retie(c->first, o.id, 0);
+      c = o.cameras.erase(c);
+    }
     it = o.cameras.empty() ? objects_.erase(it) : std::next(it);
   }
   // Merge objects seen by disjoint cameras that have come within the gate: the older id stays.
-  for (auto a = objects_.begin(); a != objects_.end(); ++a) {
-    for (auto b = std::next(a); b != objects_.end();) {
-      bool shared = false;
-      for (const auto& [cam, tie] : b->second.cameras) shared = shared || a->second.cameras.count(cam);
-      if (shared || !Within(a->second, b->second.position, b->second.covariance_xy)) {
-        ++b;
-        continue;
-      }
-      FusedObject& keep = a->second;
-      const FusedObject& gone = b->second;
-      const Eigen::Matrix2d s = keep.covariance_xy + gone.covariance_xy;
-      const Eigen::Matrix2d gain = s.ldlt().solve(keep.covariance_xy.transpose()).transpose();
-      if (gain.allFinite()) {
-        keep.position.head<2>() += gain * (gone.position - keep.position).head<2>();
-        keep.covariance_xy = (Eigen::Matrix2d::Identity() - gain) * keep.covariance_xy;
-        keep.covariance_xy = 0.5 * (keep.covariance_xy + keep.covariance_xy.transpose()).eval();
-        keep.covariance_xy.diagonal() = keep.covariance_xy.diagonal().cwiseMax(1e-4);
-      }
-      for (const auto& c : gone.cameras) keep.cameras.insert(c);
-      if (gone.last_seen_ns > keep.last_seen_ns) {
-        keep.last_seen_ns = gone.last_seen_ns;
-        keep.newest_camera = gone.newest_camera;
-      }
-      b = objects_.erase(b);
+  // Candidates are pairs closer than gate_m along the ground axis (x or y) over which the objects
+  // spread most (a sweep over the objects sorted along it).
+  Eigen::Vector2d lo = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const auto& [id, o] : objects_) lo = lo.cwiseMin(o.position.head<2>()), hi = hi.cwiseMax(o.position.head<2>());
+  const int axis = objects_.empty() || hi.x() - lo.x() >= hi.y() - lo.y() ? 0 : 1;
+  std::vector<std::pair<double, uint64_t>> sorted;
+  sorted.reserve(objects_.size());
+  for (const auto& [id, o] : objects_) sorted.emplace_back(o.position[axis], id);
+  std::sort(sorted.begin(), sorted.end());
+  std::vector<std::pair<uint64_t, uint64_t>> candidates;  // (older id, newer id)
+  for (size_t i = 0; i < sorted.size(); ++i) {
+    for (size_t j = i + 1; j < sorted.size() && sorted[j].first - sorted[i].first <= options_.gate_m; ++j) {
+      const auto [a, b] = std::minmax(sorted[i].second, sorted[j].second);
+      candidates.emplace_back(a, b);
     }
+  }
+  std::sort(candidates.begin(), candidates.end());
+  for (const auto& [keep_id, gone_id] : candidates) {
+    auto a = objects_.find(keep_id), b = objects_.find(gone_id);
+    if (a == objects_.end() || b == objects_.end()) continue;
+    bool shared = false;
+    for (const auto& [cam, tie] : b->second.cameras) shared = shared || a->second.cameras.count(cam);
+    if (shared || !Within(a->second, b->second.position, b->second.covariance_xy)) continue;
+    FusedObject& keep = a->second;
+    const FusedObject& gone = b->second;
+    const Eigen::Matrix2d s = keep.covariance_xy + gone.covariance_xy;
+    const Eigen::Matrix2d gain = s.ldlt().solve(keep.covariance_xy.transpose()).transpose();
+    if (gain.allFinite()) {
+      keep.position.head<2>() += gain * (gone.position - keep.position).head<2>();
+      keep.covariance_xy = (Eigen::Matrix2d::Identity() - gain) * keep.covariance_xy;
+      keep.covariance_xy = 0.5 * (keep.covariance_xy + keep.covariance_xy.transpose()).eval();
+      keep.covariance_xy.diagonal() = keep.covariance_xy.diagonal().cwiseMax(1e-4);
+    }
+    for (const auto& c : gone.cameras) {
+      keep.cameras.insert(c);
+      Retie(c.first, gone.id, keep.id);
+    }
+    if (gone.last_seen_ns > keep.last_seen_ns) {
+      keep.last_seen_ns = gone.last_seen_ns;
+      keep.newest_camera = gone.newest_camera;
+    }
+    objects_.erase(b);
   }
 }
 

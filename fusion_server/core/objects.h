@@ -3,17 +3,20 @@
 // camera fused into objects with one stable id each. Pure (no gRPC, no locking: SceneState holds
 // it under its mutex).
 //
-// Association: a (camera, track id) pair once tied to an object stays tied while the object
-// lives. A new pair joins the nearest live object that no other track of the same camera holds,
-// when its placement lies within the gate (Mahalanobis distance of the two uncertainties, and
-// metres); otherwise it starts a new object. Objects from different cameras that come within the
-// gate of each other are merged (the older id stays). Each object is a constant-position Kalman
-// filter in the ground plane (Joseph-form update, process noise for walking/driving speed); heading
-// comes from its motion, its path is the bounded history of fused positions.
+// Association: a (camera, stream session, track id) triple once tied to an object stays tied
+// while the object lives; the session keeps a restarted agent's track ids (which start at 1 again)
+// off the objects of its previous run. A new triple joins the nearest live object that no other
+// track of the same camera holds, when its placement lies within the gate (Mahalanobis distance of
+// the two uncertainties, and metres); otherwise it starts a new object. Objects from different
+// cameras that come within the gate of each other are merged (the older id stays). Each object is a
+// constant-position Kalman filter in the ground plane (Joseph-form update, process noise for
+// walking/driving speed); heading comes from its motion, its path is the bounded history of fused
+// positions.
 #include <cstdint>
 #include <deque>
 #include <map>
 #include <string>
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -40,6 +43,7 @@ struct ObjectObservation {
   uint32_t track_id = 0;
   int64_t t_ns = 0;  // server clock
   Placement placement;
+  uint64_t session = 0;  // the camera's stream session (SceneState::StreamOpened); 0 = unknown
 };
 
 struct FusedObject {
@@ -64,7 +68,9 @@ class ObjectFusion {
 
   // Folds one placement in; returns the id of the object it joined or started.
   uint64_t Observe(const ObjectObservation& observation);
-  // Drops objects (and camera ties) unseen for forget_s before now_ns; merges objects within the gate.
+  // Drops objects (and camera ties) unseen for forget_s before now_ns; merges objects within the gate
+  // (candidate pairs by a sweep along the wider ground axis: N log N for objects spread over the
+  // site, not N^2).
   void Expire(int64_t now_ns);
   // Objects seen within forget_s of now_ns.
   std::vector<const FusedObject*> Live(int64_t now_ns) const;
@@ -73,8 +79,13 @@ class ObjectFusion {
  private:
   void Update(FusedObject& object, const ObjectObservation& observation);
   bool Within(const FusedObject& object, const Eigen::Vector3d& p, const Eigen::Matrix2d& cov) const;
+  // Index of the ties: (camera, session, track) -> object id, kept in step with FusedObject::cameras.
+  using TrackKey = std::tuple<std::string, uint64_t, uint32_t>;
+  // Re-points (to != 0) or drops (to == 0) every tie of `camera` to object `from`.
+  void Retie(const std::string& camera, uint64_t from, uint64_t to);
   ObjectOptions options_;
   std::map<uint64_t, FusedObject> objects_;
+  std::map<TrackKey, uint64_t> ties_;
   uint64_t next_id_ = 1;
 };
 

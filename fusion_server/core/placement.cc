@@ -10,15 +10,23 @@
 namespace ave {
 
 TerrainModel::TerrainModel(const TriangleMesh& mesh) {
-  ground_.origin = mesh.origin;
-  ground_.positions = mesh.positions;
+  TriangleMesh occluders;
+  ground_.origin = occluders.origin = mesh.origin;
+  ground_.positions = occluders.positions = mesh.positions;
   for (size_t t = 0; t < mesh.TriangleCount(); ++t) {
     const SurfaceMaterial m = t < mesh.triangle_material.size() ? mesh.triangle_material[t] : SurfaceMaterial::kTerrain;
-    if (m != SurfaceMaterial::kTerrain && m != SurfaceMaterial::kRoad) continue;
-    ground_.indices.insert(ground_.indices.end(), mesh.indices.begin() + 3 * t, mesh.indices.begin() + 3 * t + 3);
-    ground_.triangle_material.push_back(m);
+    const bool ground = m == SurfaceMaterial::kTerrain || m == SurfaceMaterial::kRoad;
+    if (!ground && m != SurfaceMaterial::kWall && m != SurfaceMaterial::kRoof) continue;
+    TriangleMesh& into = ground ? ground_ : occluders;
+    into.indices.insert(into.indices.end(), mesh.indices.begin() + 3 * t, mesh.indices.begin() + 3 * t + 3);
+    into.triangle_material.push_back(m);
   }
   bvh_ = MeshBvh(ground_);
+  occluder_bvh_ = MeshBvh(occluders);
+}
+
+bool TerrainModel::Occluded(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, double max_m) const {
+  return occluder_bvh_.TriangleCount() > 0 && occluder_bvh_.Raycast(origin, direction, 1e-4, max_m).has_value();
 }
 
 std::optional<TerrainModel::Hit> TerrainModel::Raycast(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction,
@@ -116,6 +124,14 @@ std::optional<Placement> PlaceBox(const TerrainModel& terrain, const PinholeIntr
   }
   if (std::fabs(ray.dot(hit->normal)) < std::sin(options.min_grazing_deg * M_PI / 180)) {
     Fail(why, "the ground-contact ray grazes the ground");
+    return std::nullopt;
+  }
+  // From 0.5 m out (a camera on a building's wall or roof does not hide behind its own mount) to
+  // 5 cm short of the ground (a wall standing on this very spot does not hide its own foot).
+  constexpr double kMountClearance_m = 0.5;
+  if (hit->distance_m > kMountClearance_m + 0.05 &&
+      terrain.Occluded(centre + kMountClearance_m * ray, ray, hit->distance_m - kMountClearance_m - 0.05)) {
+    Fail(why, "the ground-contact ray meets a building before the ground (the box's bottom edge lies on a wall)");
     return std::nullopt;
   }
   // Sigma points over (position, rotation vector, pixel u, v): 2n rays, each re-cast. A perturbed

@@ -26,10 +26,12 @@ namespace ave {
 enum class ObjectShape : uint8_t { kBillboard = 1, kCuboid = 2, kCylinder = 3 };
 enum class ObjectKind : uint8_t { kUnknown = 0, kPerson = 1, kCar = 2 };
 
-// The ground of a static model: its terrain and road triangles in a BVH.
+// The ground of a static model: its terrain and road triangles in a BVH, plus its building walls
+// and roofs in a second BVH, which hide the ground behind them.
 class TerrainModel {
  public:
-  // Keeps only kTerrain and kRoad triangles of `mesh` (buildings, trees and objects are not ground).
+  // Keeps the kTerrain and kRoad triangles of `mesh` as ground and its kWall and kRoof triangles
+  // as occluders (trees and objects are neither).
   explicit TerrainModel(const TriangleMesh& mesh);
   // Nearest ground hit along a ray (world/local frame); the hit point and the triangle's unit
   // normal (facing the ray's origin side).
@@ -39,11 +41,15 @@ class TerrainModel {
     double distance_m = 0;
   };
   std::optional<Hit> Raycast(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, double max_m) const;
+  // Whether a building wall or roof lies along the ray within max_m.
+  bool Occluded(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, double max_m) const;
   size_t TriangleCount() const { return bvh_.TriangleCount(); }
+  size_t OccluderTriangleCount() const { return occluder_bvh_.TriangleCount(); }
 
  private:
   TriangleMesh ground_;
   MeshBvh bvh_;
+  MeshBvh occluder_bvh_;  // walls and roofs (the BVH keeps its own copy of the triangles)
 };
 
 struct PlacementOptions {
@@ -74,7 +80,9 @@ Eigen::Vector3d UndistortedRay(const PinholeIntrinsics& intrinsics, const Eigen:
 // Places a box (x0, y0, x1, y1 in wire pixel edges). `pose_covariance` is the wire's row-major 6x6
 // (position x y z [m], rotation-vector error x y z [rad], world frame); null or empty = options'
 // defaults. Nullopt (with `why` set when given) when the ray never meets the ground (sky, off the
-// model), meets it beyond max_range_m, grazes it, or any input is not finite.
+// model), meets it beyond max_range_m, grazes it, meets a building before the ground (the box's
+// bottom edge lies on a wall: the person is cut by the building in front, the contact is hidden),
+// or any input is not finite.
 std::optional<Placement> PlaceBox(const TerrainModel& terrain, const PinholeIntrinsics& intrinsics,
                                   const Rigid3d& world_from_camera, const Eigen::Matrix<double, 6, 6>* pose_covariance,
                                   const std::array<double, 4>& box, const PlacementOptions& options = {},

@@ -126,6 +126,48 @@ TEST(PlaceBox, BoxOnTheImageBorderStillPlaces) {
   EXPECT_TRUE(placed->position.allFinite());
 }
 
+// Issue 6: a person cut by a building in front has the box's bottom edge on the wall. Cast into
+// the ground only, the contact lands behind the building; with the walls as occluders it is
+// refused with a reason.
+TEST(PlaceBox, BottomEdgeOnAWallIsRefusedNotPlacedBehindIt) {
+  const scene::SyntheticCampus& campus = Campus();
+  const PinholeIntrinsics k = PinholeIntrinsics::FromFov(640, 480, 60);
+  const double edge = campus.half_extent_m - 5;
+  for (const scene::BoxBuilding& b : campus.buildings) {
+    if (b.height_m < 4) continue;
+    const double r = 0.5 * b.size_m.norm();  // the main part's footprint lies within r of its centre
+    const Eigen::Vector2d eye_xy = b.center_m - Eigen::Vector2d(r + 15, 0);
+    const Eigen::Vector2d behind_xy = b.center_m + Eigen::Vector2d(r + 4, 0);
+    if (campus.BuildingAt(eye_xy.x(), eye_xy.y()) >= 0 || campus.BuildingAt(behind_xy.x(), behind_xy.y()) >= 0 ||
+        eye_xy.cwiseAbs().maxCoeff() > edge || behind_xy.cwiseAbs().maxCoeff() > edge) {
+      continue;
+    }
+    const Eigen::Vector3d eye(eye_xy.x(), eye_xy.y(), campus.TerrainHeight(eye_xy.x(), eye_xy.y()) + 2);
+    const Eigen::Vector3d behind(behind_xy.x(), behind_xy.y(), campus.TerrainHeight(behind_xy.x(), behind_xy.y()));
+    const Rigid3d pose = LookAt(eye, behind);
+    const auto box = BoxAbove(k, pose, behind);
+    TriangleMesh no_walls = scene::BuildStaticMesh(campus, 2.0);
+    for (SurfaceMaterial& m : no_walls.triangle_material) {
+      if (m == SurfaceMaterial::kWall || m == SurfaceMaterial::kRoof) m = SurfaceMaterial::kObject;
+    }
+    const TerrainModel ground_only(no_walls);
+    EXPECT_EQ(ground_only.OccluderTriangleCount(), 0u);
+    const auto behind_wall = PlaceBox(ground_only, k, pose, nullptr, box);
+    ASSERT_TRUE(behind_wall) << b.id;  // the old behaviour: a contact behind the building
+    EXPECT_LT((behind_wall->position - behind).norm(), 0.1);
+    EXPECT_GT(Ground().OccluderTriangleCount(), 0u);
+    std::string why;
+    EXPECT_FALSE(PlaceBox(Ground(), k, pose, nullptr, box, {}, &why)) << b.id;
+    EXPECT_THAT(why, testing::HasSubstr("building"));
+    // The same camera still places a contact in front of the building.
+    const Eigen::Vector2d front_xy = eye_xy + Eigen::Vector2d(8, 0);
+    const Eigen::Vector3d front(front_xy.x(), front_xy.y(), campus.TerrainHeight(front_xy.x(), front_xy.y()));
+    EXPECT_TRUE(PlaceBox(Ground(), k, pose, nullptr, BoxAbove(k, pose, front), {}, &why)) << why;
+    return;
+  }
+  FAIL() << "no campus building with free ground on both sides along x";
+}
+
 TEST(UndistortedRay, InvertsBrownConrady) {
   PinholeIntrinsics k = PinholeIntrinsics::FromFov(640, 480, 70);
   k.distortion = {-0.12, 0.03, 0.001, -0.0005, 0.0};
@@ -189,6 +231,51 @@ TEST(ObjectFusion, SeparateObjectsKeepSeparateIdsAndPathsAreBounded) {
   EXPECT_EQ(fusion.size(), 0u);
 }
 
+// Issue 6: a restarted agent numbers its tracks from 1 again; its new stream session must not
+// continue the object its previous session's track 1 left behind.
+TEST(ObjectFusion, NewStreamSessionDoesNotInheritTheOldSessionsTrack) {
+  ObjectFusion fusion;
+  const uint64_t old_object = fusion.Observe({"camA", 1, 0, At(0, 0), /*session=*/1});
+  EXPECT_EQ(fusion.Observe({"camA", 1, 100'000'000, At(0.1, 0), /*session=*/1}), old_object);
+  // The restarted agent's track 1 is someone else, 2 m away (inside the association gate).
+  const uint64_t new_object = fusion.Observe({"camA", 1, 500'000'000, At(2, 0), /*session=*/2});
+  EXPECT_NE(new_object, old_object);
+  EXPECT_EQ(fusion.Observe({"camA", 1, 600'000'000, At(2.1, 0), /*session=*/2}), new_object);
+  // The old object is left to expire; the new one keeps its id.
+  fusion.Expire(2'300'000'000);
+  ASSERT_EQ(fusion.size(), 1u);
+  EXPECT_EQ(fusion.Live(2'300'000'000)[0]->id, new_object);
+  EXPECT_EQ(fusion.Observe({"camA", 1, 2'300'000'000, At(2.2, 0), /*session=*/2}), new_object);
+}
+
+// The merge step only compares objects closer than the gate along the wider ground axis (a
+// sweep): among 400 objects 3 m apart none merge, while two objects of two cameras that walk
+// together 50 m away merge, the older id stays, and the newer object's track is re-tied to it.
+// Laid out along x and along y.
+TEST(ObjectFusion, MergeSweepAmongManyObjectsJoinsOnlyTheClosePair) {
+  for (const bool along_y : {false, true}) {
+    SCOPED_TRACE(along_y ? "along y" : "along x");
+    auto at = [&](double along, double across) { return along_y ? At(across, along) : At(along, across); };
+    ObjectFusion fusion;
+    for (int i = 0; i < 400; ++i) fusion.Observe({"cam" + std::to_string(i), 1, 0, at(3.0 * ((i * 7919) % 400), 0)});
+    const uint64_t a = fusion.Observe({"camA", 1, 0, at(371.5, 50)});
+    const uint64_t b = fusion.Observe({"camB", 1, 0, at(381.5, 50)});
+    fusion.Expire(0);
+    EXPECT_EQ(fusion.size(), 402u);
+    EXPECT_NE(a, b);
+    int64_t t = 0;
+    for (int f = 1; f <= 10; ++f) {  // camB's track walks over to camA's object
+      t = f * 10'000'000LL;
+      EXPECT_EQ(fusion.Observe({"camA", 1, t, at(371.5, 50)}), a);
+      EXPECT_EQ(fusion.Observe({"camB", 1, t, at(371.7, 50)}), b);
+    }
+    fusion.Expire(t);
+    EXPECT_EQ(fusion.size(), 401u);
+    EXPECT_EQ(fusion.Observe({"camB", 1, t + 10'000'000, at(371.7, 50)}), a);
+    EXPECT_EQ(fusion.Observe({"camA", 1, t + 10'000'000, at(371.5, 50)}), a);
+  }
+}
+
 TEST(ObjectFusion, LateSecondCameraMergesIntoTheExistingObject) {
   ObjectFusion fusion;
   // Both cameras start separate objects in the same instant (neither saw the other): the merge
@@ -206,6 +293,25 @@ TEST(ObjectFusion, LateSecondCameraMergesIntoTheExistingObject) {
 namespace ave {
 namespace {
 
+// A frame of camera `c` at capture time t_ns with one box (track `track`) standing on `truth`.
+std::shared_ptr<v1::SensorFrame> BoxFrame(const scene::CameraSpec& c, const Eigen::Vector3d& truth, int64_t t_ns,
+                                          uint64_t sequence, uint32_t track) {
+  const auto b = BoxAbove(c.intrinsics, c.world_from_camera, truth, 8, 20);
+  auto frame = std::make_shared<v1::SensorFrame>();
+  frame->set_capture_time_ns(t_ns);
+  frame->set_sequence(sequence);
+  *frame->mutable_pose() = ToProto(c.world_from_camera);
+  v1::DetectedBox* box = frame->add_boxes();
+  box->set_track_id(track);
+  box->set_score(0.9f);
+  for (const auto& [u, v] : {std::pair{b[0], b[1]}, {b[2], b[1]}, {b[2], b[3]}, {b[0], b[3]}}) {
+    v1::Point2* p = box->add_corners();
+    p->set_x(static_cast<float>(u));
+    p->set_y(static_cast<float>(v));
+  }
+  return frame;
+}
+
 // The server core end to end: boxes of two cameras on the same walker become one object in the
 // scene update, with its model, covariance, path and both camera ids.
 TEST(SceneStateObjects, BoxesFromTwoCamerasBecomeOnePlacedObject) {
@@ -221,19 +327,7 @@ TEST(SceneStateObjects, BoxesFromTwoCamerasBecomeOnePlacedObject) {
     const Eigen::Vector3d truth(x, y, Campus().TerrainHeight(x, y));
     for (const char* id : {"cam1", "cam3"}) {
       const scene::CameraSpec& c = *Campus().FindCamera(id);
-      const auto b = BoxAbove(c.intrinsics, c.world_from_camera, truth, 8, 20);
-      auto frame = std::make_shared<v1::SensorFrame>();
-      frame->set_capture_time_ns(t0 + f * 100'000'000LL);
-      frame->set_sequence(f + 1);
-      *frame->mutable_pose() = ToProto(c.world_from_camera);
-      v1::DetectedBox* box = frame->add_boxes();
-      box->set_track_id(std::string(id) == "cam1" ? 4 : 11);
-      box->set_score(0.9f);
-      for (const auto& [u, v] : {std::pair{b[0], b[1]}, {b[2], b[1]}, {b[2], b[3]}, {b[0], b[3]}}) {
-        v1::Point2* p = box->add_corners();
-        p->set_x(static_cast<float>(u));
-        p->set_y(static_cast<float>(v));
-      }
+      auto frame = BoxFrame(c, truth, t0 + f * 100'000'000LL, f + 1, std::string(id) == "cam1" ? 4 : 11);
       ASSERT_TRUE(state.AcceptFrame(id, frame, frame->capture_time_ns()).ok());
     }
   }
@@ -251,6 +345,54 @@ TEST(SceneStateObjects, BoxesFromTwoCamerasBecomeOnePlacedObject) {
   EXPECT_NEAR(o.heading_rad(), 0.0, 0.3);
   // Long after the last frame the object is gone from updates.
   EXPECT_EQ(state.BuildUpdate({}, false, t0 + 60'000'000'000LL, cursor).objects_size(), 0);
+}
+
+// Issue 6: an agent that has not measured its clock offset (0 on the wire) may run on a clock hours
+// away from the server's: its objects are timed by the server's receipt, so they neither expire at
+// once nor linger; with an offset the capture time on the server clock is used.
+TEST(SceneStateObjects, UnknownClockOffsetTimesObjectsByReceipt) {
+  SceneState state;
+  state.SetStaticModel(scene::BuildStaticMesh(Campus(), 2.0));
+  const scene::CameraSpec& c = *Campus().FindCamera("cam1");
+  state.UpsertCamera({c.id, c.name, c.intrinsics, c.world_from_camera, "", true});
+  const uint64_t session = state.StreamOpened(c.id, c.intrinsics);
+  EXPECT_GT(session, 0u);
+  const Eigen::Vector3d truth(-2, -5, Campus().TerrainHeight(-2, -5));
+  const int64_t server_now = 5'000'000'000'000;
+  const int64_t agent_clock = server_now - 3'600'000'000'000;  // an hour behind
+  auto unknown = BoxFrame(c, truth, agent_clock, 1, 1);
+  ASSERT_TRUE(state.AcceptFrame(c.id, unknown, server_now, session).ok());
+  ViewerCursor cursor;
+  EXPECT_EQ(state.BuildUpdate({}, false, server_now + 500'000'000, cursor).objects_size(), 1);
+  EXPECT_EQ(state.BuildUpdate({}, false, server_now + 10'000'000'000, cursor).objects_size(), 0);
+  // With the offset known, the capture time is used: a frame captured 1.5 s before its receipt
+  // leaves an object that is gone 1 s after the receipt (forget_s = 2).
+  auto known = BoxFrame(c, truth, agent_clock + 20'000'000'000, 2, 1);
+  known->set_clock_offset_ns(server_now - agent_clock - 1'500'000'000);
+  ASSERT_TRUE(state.AcceptFrame(c.id, known, server_now + 20'000'000'000, session).ok());
+  EXPECT_EQ(state.BuildUpdate({}, false, server_now + 20'000'000'000, cursor).objects_size(), 1);
+  EXPECT_EQ(state.BuildUpdate({}, false, server_now + 21'000'000'000, cursor).objects_size(), 0);
+}
+
+// Issue 6: the stream session reaches the fusion through AcceptFrame: a reconnected agent's track 1
+// starts a new object.
+TEST(SceneStateObjects, ReconnectedStreamStartsNewObjects) {
+  SceneState state;
+  state.SetStaticModel(scene::BuildStaticMesh(Campus(), 2.0));
+  const scene::CameraSpec& c = *Campus().FindCamera("cam1");
+  state.UpsertCamera({c.id, c.name, c.intrinsics, c.world_from_camera, "", true});
+  const Eigen::Vector3d truth(-2, -5, Campus().TerrainHeight(-2, -5));
+  const int64_t t0 = 1'000'000'000'000;
+  const uint64_t first = state.StreamOpened(c.id, c.intrinsics);
+  ASSERT_TRUE(state.AcceptFrame(c.id, BoxFrame(c, truth, t0, 1, 1), t0, first).ok());
+  state.StreamClosed(c.id);
+  const uint64_t second = state.StreamOpened(c.id, c.intrinsics);
+  EXPECT_NE(first, second);
+  ASSERT_TRUE(state.AcceptFrame(c.id, BoxFrame(c, truth, t0 + 300'000'000, 1, 1), t0 + 300'000'000, second).ok());
+  ViewerCursor cursor;
+  const v1::SceneUpdate update = state.BuildUpdate({}, false, t0 + 400'000'000, cursor);
+  ASSERT_EQ(update.objects_size(), 2);
+  EXPECT_NE(update.objects(0).object_id(), update.objects(1).object_id());
 }
 
 }  // namespace

@@ -41,13 +41,15 @@ std::vector<std::string> SceneState::CameraIds() const {
   return ids;
 }
 
-void SceneState::StreamOpened(const std::string& id, const PinholeIntrinsics& intrinsics) {
+uint64_t SceneState::StreamOpened(const std::string& id, const PinholeIntrinsics& intrinsics) {
   std::lock_guard lock(mu_);
+  const uint64_t session = ++sessions_;
   auto it = cameras_.find(id);
-  if (it == cameras_.end()) return;
+  if (it == cameras_.end()) return session;
   it->second.stream_intrinsics = intrinsics;
   ++it->second.open_streams;
   BumpLocked();
+  return session;
 }
 
 void SceneState::StreamClosed(const std::string& id) {
@@ -58,8 +60,65 @@ void SceneState::StreamClosed(const std::string& id) {
   BumpLocked();
 }
 
+namespace {
+
+// The box's axis-aligned extent (x0, y0, x1, y1) from its corners.
+std::array<double, 4> BoxExtent(const v1::DetectedBox& box) {
+  std::array<double, 4> b = {1e300, 1e300, -1e300, -1e300};
+  for (const v1::Point2& c : box.corners()) {
+    b = {std::min<double>(b[0], c.x()), std::min<double>(b[1], c.y()), std::max<double>(b[2], c.x()),
+         std::max<double>(b[3], c.y())};
+  }
+  return b;
+}
+
+// Places every box of `frame` (no lock held: the terrain is immutable).
+std::vector<ObjectObservation> PlaceFrameBoxes(const TerrainModel& terrain, const PinholeIntrinsics& k,
+                                               const Rigid3d& mounting_pose, const v1::SensorFrame& frame,
+                                               const std::string& id, uint64_t session, int64_t t_ns) {
+  const Rigid3d pose = frame.has_pose() ? FromProto(frame.pose()) : mounting_pose;
+  Eigen::Matrix<double, 6, 6> covariance;
+  const bool has_covariance = frame.has_pose() && frame.pose().covariance_size() == 36;
+  if (has_covariance) {
+    for (int i = 0; i < 36; ++i) covariance(i / 6, i % 6) = frame.pose().covariance(i);
+  }
+  std::vector<ObjectObservation> placed;
+  for (const v1::DetectedBox& box : frame.boxes()) {
+    if (auto p = PlaceBox(terrain, k, pose, has_covariance ? &covariance : nullptr, BoxExtent(box))) {
+      placed.push_back({id, box.track_id(), t_ns, *p, session});
+    }
+  }
+  return placed;
+}
+
+// Object time on the server clock (see SetStaticModel).
+int64_t ObjectTimeNs(const v1::SensorFrame& frame, int64_t received_ns) {
+  if (frame.clock_offset_ns() == 0) return received_ns;
+  return std::min(frame.capture_time_ns() + frame.clock_offset_ns(), received_ns);
+}
+
+}  // namespace
+
 absl::Status SceneState::AcceptFrame(const std::string& id, std::shared_ptr<const v1::SensorFrame> frame,
-                                     int64_t received_ns) {
+                                     int64_t received_ns, uint64_t session) {
+  const int64_t t_ns = ObjectTimeNs(*frame, received_ns);
+  std::shared_ptr<const TerrainModel> terrain;
+  std::vector<ObjectObservation> placed;
+  if (!frame->metadata_only()) {
+    PinholeIntrinsics k;
+    Rigid3d mounting_pose;
+    {
+      std::lock_guard lock(mu_);
+      auto it = cameras_.find(id);
+      if (it == cameras_.end()) return absl::NotFoundError(absl::StrCat("camera '", id, "' is not registered"));
+      terrain = terrain_;
+      k = it->second.stream_intrinsics.value_or(it->second.entry.intrinsics);
+      mounting_pose = it->second.entry.mounting_pose;
+    }
+    if (terrain && frame->boxes_size() > 0) {
+      placed = PlaceFrameBoxes(*terrain, k, mounting_pose, *frame, id, session, t_ns);
+    }
+  }
   std::lock_guard lock(mu_);
   auto it = cameras_.find(id);
   if (it == cameras_.end()) return absl::NotFoundError(absl::StrCat("camera '", id, "' is not registered"));
@@ -70,7 +129,13 @@ absl::Status SceneState::AcceptFrame(const std::string& id, std::shared_ptr<cons
   ++it->second.accepted;
   it->second.latest = std::move(frame);
   it->second.latest_received_ns = received_ns;
-  if (terrain_) PlaceBoxesLocked(it->second, *it->second.latest, id);
+  for (const ObjectObservation& observation : placed) objects_.Observe(observation);
+  // Expiry and merging look at every object: at most ten times a second of object time.
+  constexpr int64_t kExpireEveryNs = 100'000'000;
+  if (terrain && (t_ns - objects_expired_ns_ >= kExpireEveryNs || t_ns < objects_expired_ns_ - 10 * kExpireEveryNs)) {
+    objects_.Expire(t_ns);
+    objects_expired_ns_ = t_ns;
+  }
   BumpLocked();
   return absl::OkStatus();
 }
@@ -84,30 +149,6 @@ void SceneState::SetStaticModel(const TriangleMesh& mesh) {
 size_t SceneState::ObjectCount() const {
   std::lock_guard lock(mu_);
   return objects_.size();
-}
-
-void SceneState::PlaceBoxesLocked(const Live& live, const v1::SensorFrame& frame, const std::string& id) {
-  const int64_t t_ns = frame.capture_time_ns() + frame.clock_offset_ns();
-  if (frame.boxes_size() > 0) {
-    const PinholeIntrinsics k = live.stream_intrinsics.value_or(live.entry.intrinsics);
-    const Rigid3d pose = frame.has_pose() ? FromProto(frame.pose()) : live.entry.mounting_pose;
-    Eigen::Matrix<double, 6, 6> covariance;
-    const bool has_covariance = frame.has_pose() && frame.pose().covariance_size() == 36;
-    if (has_covariance) {
-      for (int i = 0; i < 36; ++i) covariance(i / 6, i % 6) = frame.pose().covariance(i);
-    }
-    for (const v1::DetectedBox& box : frame.boxes()) {
-      std::array<double, 4> b = {1e300, 1e300, -1e300, -1e300};
-      for (const v1::Point2& c : box.corners()) {
-        b = {std::min<double>(b[0], c.x()), std::min<double>(b[1], c.y()), std::max<double>(b[2], c.x()),
-             std::max<double>(b[3], c.y())};
-      }
-      if (auto placed = PlaceBox(*terrain_, k, pose, has_covariance ? &covariance : nullptr, b)) {
-        objects_.Observe({id, box.track_id(), t_ns, *placed});
-      }
-    }
-  }
-  objects_.Expire(t_ns);
 }
 
 uint64_t SceneState::AcceptedCount(const std::string& id) const {
@@ -157,8 +198,23 @@ bool SceneState::shut_down() const {
 
 v1::SceneUpdate SceneState::BuildUpdate(const std::vector<std::string>& camera_ids, bool include_jpeg, int64_t now_ns,
                                         ViewerCursor& cursor) const {
-  std::lock_guard lock(mu_);
   v1::SceneUpdate update;
+  BuildUpdate(camera_ids, include_jpeg, now_ns, cursor, update);
+  return update;
+}
+
+void SceneState::BuildUpdate(const std::vector<std::string>& camera_ids, bool include_jpeg, int64_t now_ns,
+                             ViewerCursor& cursor, v1::SceneUpdate& update) const {
+  update.Clear();
+  // Boxes and JPEGs (~50 KB each) are copied into the update after the lock is released: the
+  // frames are immutable and held by shared_ptr. (camera, frame, whether its JPEG goes out)
+  struct Copy {
+    v1::CameraState* cam;
+    std::shared_ptr<const v1::SensorFrame> frame;
+    bool jpeg;
+  };
+  std::vector<Copy> copies;
+  std::unique_lock lock(mu_);
   update.set_server_time_ns(now_ns);
   cursor.last_sent.clear();
   cursor.last_skipped = 0;
@@ -203,10 +259,10 @@ v1::SceneUpdate SceneState::BuildUpdate(const std::vector<std::string>& camera_i
       cam->set_frame_capture_time_ns(live.latest->capture_time_ns());
       cam->set_frame_capture_server_time_ns(capture_server_ns);
       cam->set_frame_sequence(live.latest->sequence());
-      *cam->mutable_boxes() = live.latest->boxes();
       uint64_t& sent = cursor.sent_sequence[id];
-      if (include_jpeg && in_view && live.latest->sequence() != sent && !live.latest->jpeg().empty()) {
-        cam->set_jpeg(live.latest->jpeg());
+      const bool send_jpeg = include_jpeg && in_view && live.latest->sequence() != sent && !live.latest->jpeg().empty();
+      copies.push_back({cam, live.latest, send_jpeg});
+      if (send_jpeg) {
         sent = live.latest->sequence();
         auto [slot, first] = cursor.sent_accepted.try_emplace(id, live.accepted);
         // Frames that arrived after the previous send and were replaced before this one.
@@ -254,7 +310,11 @@ v1::SceneUpdate SceneState::BuildUpdate(const std::vector<std::string>& camera_i
     out->set_last_seen_ns(o->last_seen_ns);
     out->set_kind(static_cast<uint32_t>(o->kind));
   }
-  return update;
+  lock.unlock();
+  for (const Copy& c : copies) {
+    *c.cam->mutable_boxes() = c.frame->boxes();
+    if (c.jpeg) c.cam->set_jpeg(c.frame->jpeg());
+  }
 }
 
 }  // namespace ave

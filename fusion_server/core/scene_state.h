@@ -71,14 +71,18 @@ class SceneState {
   std::optional<CameraEntry> FindCamera(const std::string& id) const;
   std::vector<std::string> CameraIds() const;
 
-  // A sensor stream opened (with the intrinsics it announced) or closed.
-  void StreamOpened(const std::string& id, const PinholeIntrinsics& intrinsics);
+  // A sensor stream opened (with the intrinsics it announced) or closed. StreamOpened returns the
+  // stream's session number (unique in this server's life, > 0) to pass to AcceptFrame.
+  uint64_t StreamOpened(const std::string& id, const PinholeIntrinsics& intrinsics);
   void StreamClosed(const std::string& id);
 
   // Keeps `frame` as the camera's latest. NotFound when the camera is not (or no longer) registered.
   // A metadata-only frame (replayed after an outage) is counted but does not replace the latest
   // image. The frame's clock_offset_ns, when set, places its capture time on the server clock.
-  absl::Status AcceptFrame(const std::string& id, std::shared_ptr<const v1::SensorFrame> frame, int64_t received_ns);
+  // Its boxes are placed on the terrain on the caller's thread before the state's lock is taken;
+  // `session` keeps the track ids of different stream sessions of one camera apart.
+  absl::Status AcceptFrame(const std::string& id, std::shared_ptr<const v1::SensorFrame> frame, int64_t received_ns,
+                           uint64_t session = 0);
 
   // Frames with a JPEG accepted for a camera since it was registered (0 for an unknown camera).
   uint64_t AcceptedCount(const std::string& id) const;
@@ -91,6 +95,9 @@ class SceneState {
   // Moving objects (issue 6): with a static model set, the boxes of every accepted frame are placed
   // on its terrain (placement.h) and fused across cameras (objects.h); BuildUpdate sends the live
   // objects seen by the requested cameras. Without one, boxes are forwarded but not placed.
+  // Object time is the capture time on the server clock when the frame carries the agent's clock
+  // offset (never later than its receipt), else the server's receipt time: an agent that has not
+  // yet measured its offset cannot make objects expire early or linger.
   void SetStaticModel(const TriangleMesh& mesh);
   size_t ObjectCount() const;
 
@@ -106,6 +113,10 @@ class SceneState {
   // of cameras the viewer knew that are gone. Advances the cursor.
   v1::SceneUpdate BuildUpdate(const std::vector<std::string>& camera_ids, bool include_jpeg, int64_t now_ns,
                               ViewerCursor& cursor) const;
+  // The same, filled into `update` (which may live on a protobuf arena); the state's lock is not held
+  // while JPEGs and boxes are copied into it.
+  void BuildUpdate(const std::vector<std::string>& camera_ids, bool include_jpeg, int64_t now_ns, ViewerCursor& cursor,
+                   v1::SceneUpdate& update) const;
 
  private:
   struct Live {
@@ -125,7 +136,8 @@ class SceneState {
   std::map<std::string, Live> cameras_;
   std::shared_ptr<const TerrainModel> terrain_;
   ObjectFusion objects_;
-  void PlaceBoxesLocked(const Live& live, const v1::SensorFrame& frame, const std::string& id);
+  int64_t objects_expired_ns_ = 0;  // object time of the last ObjectFusion::Expire (run <= 10 Hz)
+  uint64_t sessions_ = 0;
   uint64_t version_ = 1;
   bool shut_down_ = false;
 };

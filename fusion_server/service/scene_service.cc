@@ -3,6 +3,8 @@
 #include <limits>
 #include <thread>
 
+#include <google/protobuf/arena.h>
+
 #include "absl/strings/str_cat.h"
 #include "fusion_server/core/validation.h"
 #include "fusion_server/service/services.h"
@@ -107,7 +109,11 @@ grpc::Status SceneServiceImpl::Subscribe(grpc::ServerContext* context, const v1:
     std::this_thread::sleep_until(next_send);
     next_send = std::chrono::steady_clock::now() + min_interval;
     seen = state_.version();
-    v1::SceneUpdate update = state_.BuildUpdate(camera_ids, request->include_jpeg(), NowNs(), cursor);
+    // One arena per update: its few thousand sub-messages (boxes, paths, matrices) are carved from
+    // a few blocks and freed at once instead of one malloc/free each.
+    google::protobuf::Arena arena;
+    v1::SceneUpdate& update = *google::protobuf::Arena::CreateMessage<v1::SceneUpdate>(&arena);
+    state_.BuildUpdate(camera_ids, request->include_jpeg(), NowNs(), cursor, update);
     // The frames in this update waited in the viewer's one-per-camera slots.
     const int64_t depth = static_cast<int64_t>(cursor.last_sent.size());
     metrics.viewer_queue_depth += depth - queue_depth;

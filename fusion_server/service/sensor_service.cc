@@ -98,7 +98,7 @@ grpc::Status SensorServiceImpl::Stream(grpc::ServerContext* context,
   }
   AVE_LOG(INFO) << "camera '" << id << "' connected from " << peer << " (" << hello.software_version() << ", "
                 << hello.intrinsics().width() << "x" << hello.intrinsics().height() << ")";
-  state_.StreamOpened(id, FromProto(hello.intrinsics()));
+  const uint64_t session = state_.StreamOpened(id, FromProto(hello.intrinsics()));
   ServerMetrics& metrics = shared_.metrics;
   ++metrics.sensors_connected;
 
@@ -128,7 +128,7 @@ grpc::Status SensorServiceImpl::Stream(grpc::ServerContext* context,
       metrics.capture_to_ingest_s.Observe((received_ns - capture_ns - message.frame().clock_offset_ns()) * 1e-9);
     }
     auto frame = std::make_shared<v1::SensorFrame>(std::move(*message.mutable_frame()));
-    if (absl::Status s = state_.AcceptFrame(id, std::move(frame), received_ns); !s.ok()) {
+    if (absl::Status s = state_.AcceptFrame(id, std::move(frame), received_ns, session); !s.ok()) {
       AVE_LOG(WARNING) << "camera '" << id << "': " << s.message() << " (removed while streaming)";
       result = ToGrpc(s);
       break;
