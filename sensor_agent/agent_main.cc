@@ -22,7 +22,8 @@ void OnSignal(int) { g_stop = true; }
 
 // --detect-only: detection and tracking on the source without a server (issue 6).
 int RunDetectOnly(const std::string& source_spec, const ave::AgentOptions& options, double fov_deg,
-                  const ave::detect::DetectorOptions& detector_options, const std::string& tracks_out) {
+                  const ave::detect::DetectorOptions& detector_options, const std::string& tracks_out,
+                  double latency_s) {
   if (tracks_out.empty()) {
     std::cerr << "ave-agent: --detect-only needs --out FILE (or '-')\n";
     return 2;
@@ -41,7 +42,7 @@ int RunDetectOnly(const std::string& source_spec, const ave::AgentOptions& optio
     }
   }
   std::ostream& out = tracks_out == "-" ? std::cout : file;
-  auto summary = ave::detect::RunDetectOnly(**source, detector_options, out, options.max_frames);
+  auto summary = ave::detect::RunDetectOnly(**source, detector_options, out, options.max_frames, latency_s);
   if (!summary.ok()) {
     std::cerr << "ave-agent: " << summary.status().message() << "\n";
     return 1;
@@ -91,10 +92,20 @@ int main(int argc, char** argv) {
   app.add_option("--out", tracks_out, "--detect-only: tracks file, one JSON object per frame ('-' = stdout)");
   app.add_option("--background", background, "background model: average, gaussian or mixture")
       ->capture_default_str()->check(CLI::IsMember({"average", "gaussian", "mixture"}));
+  // Offline files need no live output: by default --detect-only holds each record for the
+  // validation time, so every frame of a track's validation second gets its box (near-online).
+  double latency_s = -1;
+  app.add_option("--latency", latency_s,
+                 "--detect-only: hold each frame's record S seconds (source time) and write back the boxes of tracks "
+                 "validated meanwhile (default: the validation time, 1 s; 0 = live output)")
+      ->check(CLI::Range(0.0, 3600.0));
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-agent")) return *exit_code;
   ave::detect::DetectorOptions detector_options;
   ave::detect::ParseBackgroundKind(background, detector_options.background);
-  if (detect_only) return RunDetectOnly(source_spec, options, fov_deg, detector_options, tracks_out);
+  if (detect_only) {
+    return RunDetectOnly(source_spec, options, fov_deg, detector_options, tracks_out,
+                         latency_s < 0 ? detector_options.tracker.validate_s : latency_s);
+  }
   if (options.camera_id.empty()) {
     std::cerr << "ave-agent: --camera is required (unless --detect-only)\n";
     return 2;

@@ -1,6 +1,8 @@
 #include "sensor_agent/detect/detect_run.h"
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <set>
 
@@ -30,10 +32,38 @@ std::string FrameJson(int64_t frame, double t_s, const std::vector<Detection>& t
   return s + "]}";
 }
 
+void DelayedWriter::Add(int64_t frame, double t_s, std::vector<Detection> tracks,
+                        const std::vector<std::pair<double, Detection>>& backfill) {
+  held_.push_back({frame, t_s, std::move(tracks)});
+  // Back-fill times are the t_s of earlier Process calls: they equal held records' times (the
+  // tolerance is only a guard). A record exactly latency_s old is still held.
+  constexpr double kSame = 1e-6;
+  while (!held_.empty() && (latency_s_ <= 0 || held_.front().t_s < t_s - latency_s_ - kSame)) {
+    out_ << FrameJson(held_.front().frame, held_.front().t_s, held_.front().tracks) << '\n';
+    held_.pop_front();
+  }
+  for (const auto& [bt, det] : backfill) {
+    for (auto it = held_.rbegin(); it != held_.rend(); ++it) {
+      if (std::fabs(it->t_s - bt) > kSame) continue;
+      it->tracks.push_back(det);
+      ++backfilled_;
+      break;
+    }
+  }
+}
+
+void DelayedWriter::Flush() {
+  for (const Record& r : held_) out_ << FrameJson(r.frame, r.t_s, r.tracks) << '\n';
+  held_.clear();
+  out_.flush();
+}
+
 absl::StatusOr<DetectRunSummary> RunDetectOnly(FrameSource& source, const DetectorOptions& options, std::ostream& out,
-                                               int64_t max_frames) {
+                                               int64_t max_frames, double latency_s) {
   using Clock = std::chrono::steady_clock;
+  static const std::vector<std::pair<double, Detection>> kNoBackfill;
   Detector detector(options);
+  DelayedWriter writer(out, std::max(0.0, latency_s));
   DetectRunSummary summary;
   std::set<uint32_t> ids;
   const auto start = Clock::now();
@@ -48,10 +78,10 @@ absl::StatusOr<DetectRunSummary> RunDetectOnly(FrameSource& source, const Detect
     const std::vector<Detection> tracks = detector.Process(frame->bgr.data(), frame->width, frame->height, frame->scene_time_s);
     summary.detect_seconds += std::chrono::duration<double>(Clock::now() - t0).count();
     for (const Detection& d : tracks) ids.insert(d.track_id);
-    out << FrameJson(summary.frames, frame->scene_time_s, tracks) << '\n';
+    writer.Add(summary.frames, frame->scene_time_s, tracks, latency_s > 0 ? detector.backfill() : kNoBackfill);
     ++summary.frames;
   }
-  out.flush();
+  writer.Flush();
   summary.distinct_tracks = static_cast<int64_t>(ids.size());
   summary.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   return summary;

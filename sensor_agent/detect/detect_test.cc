@@ -20,21 +20,35 @@ uint8_t Hash(int x, int y, int salt) {
   return static_cast<uint8_t>(h >> 24);
 }
 
-// A textured background (smooth blocks of 8 px plus +-2 noise per frame) with an optional
-// textured object at (ox, oy) of size ow x oh (may cross the border); `gain` scales everything.
-std::vector<uint8_t> Scene(int w, int h, int frame, double ox, double oy, int ow, int oh, double gain = 1.0) {
+struct Object {
+  double x, y;  // top-left corner (may be outside the image)
+  int w, h;
+  int salt = 7;  // texture
+};
+
+// A textured background (smooth blocks of 8 px plus +-2 noise per frame) with textured objects
+// (may cross the border; later ones in front); `gain` scales everything.
+std::vector<uint8_t> Scene(int w, int h, int frame, const std::vector<Object>& objects, double gain = 1.0) {
   std::vector<uint8_t> bgr(static_cast<size_t>(w) * h * 3);
   for (int y = 0; y < h; ++y) {
     for (int x = 0; x < w; ++x) {
       double v = 60 + Hash(x / 8, y / 8, 1) / 3.0 + (Hash(x, y, frame) % 5) - 2;
-      const bool inside = x >= ox && x < ox + ow && y >= oy && y < oy + oh;
-      if (inside) v = 170 + (Hash(static_cast<int>(x - ox) / 3, static_cast<int>(y - oy) / 3, 7) % 60);
+      for (const Object& o : objects) {
+        if (x >= o.x && x < o.x + o.w && y >= o.y && y < o.y + o.h) {
+          v = 170 + (Hash(static_cast<int>(x - o.x) / 3, static_cast<int>(y - o.y) / 3, o.salt) % 60);
+        }
+      }
       const uint8_t g = static_cast<uint8_t>(std::clamp(v * gain, 0.0, 255.0));
       uint8_t* p = &bgr[(static_cast<size_t>(y) * w + x) * 3];
       p[0] = p[1] = p[2] = g;
     }
   }
   return bgr;
+}
+
+// One object at (ox, oy) of size ow x oh.
+std::vector<uint8_t> Scene(int w, int h, int frame, double ox, double oy, int ow, int oh, double gain = 1.0) {
+  return Scene(w, h, frame, std::vector<Object>{{ox, oy, ow, oh}}, gain);
 }
 
 TEST(LabelComponents, FourConnectedWithEquivalencesAndMinArea) {
@@ -258,6 +272,40 @@ TEST(Detector, ObjectLeavingAndReenteringIsTrackedAgainWithANewTag) {
   ASSERT_FALSE(second.empty());
   EXPECT_NE(first.front(), second.back());
   EXPECT_EQ(second.front(), second.back());
+}
+
+TEST(Detector, TwoTracksWhoseBlobsMergeKeepTheirIdsAndBoxes) {
+  Detector d(Small());
+  for (int f = 0; f < 30; ++f) {
+    const auto img = Scene(160, 120, f, -100, 0, 0, 0);
+    d.Process(img.data(), 160, 120, f / 15.0);
+  }
+  // A walks right and B left until they walk down side by side, 2 px apart (one blob after the
+  // closing), from 4.5 s to the end; both keep walking down.
+  auto a_x = [](double t) { return std::min(20 + 20 * (t - 2), 70.0); };
+  auto b_x = [](double t) { return std::max(128 - 20 * (t - 2), 84.0); };
+  auto y = [](double t) { return 30 + 8 * (t - 2); };
+  uint32_t id_a = 0, id_b = 0;
+  int merged_frames = 0;
+  for (int f = 30; f < 120; ++f) {
+    const double t = f / 15.0;
+    const auto img = Scene(160, 120, f, {{a_x(t), y(t), 12, 24, 7}, {b_x(t), y(t) - 4, 12, 28, 11}});
+    const auto seen = d.Process(img.data(), 160, 120, t);
+    if (f < 60) continue;  // both validated after their first second
+    ASSERT_EQ(seen.size(), 2u) << "frame " << f;
+    const Detection& left = seen[0].corners[0][0] < seen[1].corners[0][0] ? seen[0] : seen[1];
+    const Detection& right = &left == &seen[0] ? seen[1] : seen[0];
+    if (!id_a) id_a = left.track_id, id_b = right.track_id;
+    EXPECT_EQ(left.track_id, id_a) << "frame " << f;
+    EXPECT_EQ(right.track_id, id_b) << "frame " << f;
+    EXPECT_NEAR(left.corners[0][0], a_x(t), 3.0) << "frame " << f;
+    EXPECT_NEAR(left.corners[2][0], a_x(t) + 12, 3.0) << "frame " << f;
+    EXPECT_NEAR(right.corners[0][0], b_x(t), 3.0) << "frame " << f;
+    EXPECT_NEAR(right.corners[2][0], b_x(t) + 12, 3.0) << "frame " << f;
+    merged_frames += t >= 4.5 && d.stats().regions == 1;  // the two really are one blob
+  }
+  EXPECT_NE(id_a, id_b);
+  EXPECT_GE(merged_frames, 45);
 }
 
 TEST(DetectorOptions, CheckNamesTheField) {

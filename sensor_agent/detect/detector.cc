@@ -100,11 +100,12 @@ struct Detector::Impl {
   // illumination drift, auto exposure). Near-black frames are left alone.
   void CompensateGain() {
     const double background_level = model->MeanLevel(grey.total());
-    double sum = 0;
+    uint64_t sum = 0;  // integer: exact, and no floating-point dependency chain
     size_t n = 0;
     const uint8_t* g = grey.ptr<uint8_t>();  // continuous: the first plane or the grey work image
-    for (size_t i = 0; i < grey.total(); i += 7, ++n) sum += g[i];  // the background's subsample
-    const double frame_level = n ? sum / static_cast<double>(n) : 0;
+    const size_t total = grey.total();
+    for (size_t i = 0; i < total; i += 7, ++n) sum += g[i];  // the background's subsample
+    const double frame_level = n ? static_cast<double>(sum) / static_cast<double>(n) : 0;
     if (background_level <= 0 || frame_level < 4) return;
     const double gain = std::clamp(background_level / frame_level, 0.25, 4.0);
     if (std::fabs(gain - 1) > 0.01) grey.convertTo(grey, -1, gain);  // in place: stays in `samples`
@@ -130,7 +131,9 @@ struct Detector::Impl {
       const uint8_t* dg = sample_difference.data() + static_cast<size_t>(y) * ww;
       const uint8_t* dc = sample_difference.data() + n + static_cast<size_t>(std::min(y / 2, ch - 1)) * cw;
       uint8_t* out = difference.data() + static_cast<size_t>(y) * ww;
-      for (int x = 0; x < ww; ++x) out[x] = std::max(dg[x], dc[std::min(x / 2, cw - 1)]);
+      const int paired = 2 * cw;  // columns with their own chroma sample; an odd last one reuses cw - 1
+      for (int x = 0; x < paired; ++x) out[x] = std::max(dg[x], dc[x >> 1]);
+      for (int x = paired; x < ww; ++x) out[x] = std::max(dg[x], dc[cw - 1]);
     }
   }
 };
@@ -183,7 +186,7 @@ std::vector<Detection> Detector::Process(const uint8_t* bgr, int width, int heig
   m.has_previous = true;
   m.last_t = t_s;
   std::vector<Detection> out;
-  for (const TrackBox& b : m.tracker.Update(regions, grey, m.ww, m.wh, t_s)) out.push_back(m.ToFrame(b));
+  for (const TrackBox& b : m.tracker.Update(regions, grey, m.ww, m.wh, t_s, m.mask.data())) out.push_back(m.ToFrame(b));
   m.backfill.clear();
   for (const auto& [bt, b] : m.tracker.backfill()) m.backfill.emplace_back(bt, m.ToFrame(b));
   return out;

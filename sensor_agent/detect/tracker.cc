@@ -15,6 +15,7 @@ std::string TrackerOptions::Check() const {
   if (!(coast_s >= 0 && coast_s < 1e6)) return "coast_s must be in [0, 1e6)";
   if (!(tentative_gap_s >= 0 && tentative_gap_s < 1e6)) return "tentative_gap_s must be in [0, 1e6)";
   if (!(gate > 0 && gate < 1e3)) return "gate must be in (0, 1000)";
+  if (!(split_min_age_s < 1e6)) return "split_min_age_s must be < 1e6 (negative: never split)";
   return "";
 }
 
@@ -69,11 +70,94 @@ float Correlation(const std::vector<float>& a, float mean_a, bool flat_a, const 
 
 double Cx(const TrackBox& b) { return 0.5 * (b.x0 + b.x1); }
 double Cy(const TrackBox& b) { return 0.5 * (b.y0 + b.y1); }
+double Area(const TrackBox& b) { return std::max(0.0, b.x1 - b.x0) * std::max(0.0, b.y1 - b.y0); }
+
+double Overlap(const TrackBox& a, const TrackBox& b) {  // intersection over union
+  const double ix = std::max(0.0, std::min(a.x1, b.x1) - std::max(a.x0, b.x0));
+  const double iy = std::max(0.0, std::min(a.y1, b.y1) - std::max(a.y0, b.y0));
+  const double inter = ix * iy, uni = Area(a) + Area(b) - inter;
+  return uni > 0 ? inter / uni : 0;
+}
 
 }  // namespace
 
-std::vector<TrackBox> Tracker::Update(const std::vector<Component>& regions, const uint8_t* grey, int width,
-                                      int height, double t_s) {
+TrackBox Tracker::Candidate::Predicted(double t_s) const {
+  const double dt = t_s - last_t;
+  TrackBox p = box;
+  p.x0 += vx * dt, p.x1 += vx * dt, p.y0 += vy * dt, p.y1 += vy * dt;
+  return p;
+}
+
+std::vector<Component> Tracker::SplitMerged(const std::vector<Component>& regions, const uint8_t* mask, int width,
+                                            double t_s) const {
+  if (options_.split_min_age_s < 0 || candidates_.size() < 2) return regions;
+  std::vector<Component> out;
+  out.reserve(regions.size());
+  std::vector<TrackBox> inside;
+  for (const Component& r : regions) {
+    const TrackBox rb{0, double(r.x0), double(r.y0), double(r.x1 + 1), double(r.y1 + 1)};
+    // Established objects (recently matched, older than split_min_age_s) predicted inside it,
+    // each clearly smaller than the region; two predictions of one object (IoU >= 0.5) count once.
+    inside.clear();
+    for (const Candidate& c : candidates_) {
+      if (t_s - c.first_t < options_.split_min_age_s || t_s - c.last_t > options_.tentative_gap_s + 1e-9) continue;
+      const TrackBox p = c.Predicted(t_s);
+      if (Cx(p) < rb.x0 || Cx(p) > rb.x1 || Cy(p) < rb.y0 || Cy(p) > rb.y1 || Area(p) > 0.8 * Area(rb)) continue;
+      if (std::none_of(inside.begin(), inside.end(), [&](const TrackBox& q) { return Overlap(p, q) >= 0.5; })) {
+        inside.push_back(p);
+      }
+    }
+    if (inside.size() < 2) {
+      out.push_back(r);
+      continue;
+    }
+    if (!mask) {
+      // The predicted boxes clipped to the region.
+      for (const TrackBox& p : inside) {
+        Component part{std::max(r.x0, static_cast<int>(std::floor(p.x0))), std::max(r.y0, static_cast<int>(std::floor(p.y0))),
+                       std::min(r.x1, static_cast<int>(std::ceil(p.x1)) - 1),
+                       std::min(r.y1, static_cast<int>(std::ceil(p.y1)) - 1), 0};
+        part.area = std::max(0, part.width()) * std::max(0, part.height());
+        if (part.area > 0) out.push_back(part);
+      }
+      continue;
+    }
+    // Each foreground pixel of the region goes to the nearest predicted centre (in box sizes), none
+    // outside the predicted box grown by a quarter of its size on every side; each part is bounded
+    // by its pixels. Not clipped to the predicted boxes themselves: a prediction that overshoots
+    // would clip its object and feed the overshoot back into the velocity, while the nearest-centre
+    // border moves only half as far (ave-bench detect, 20 s: MOTA visible 0.780 clipped, 0.771
+    // nearest centre within one box size, 0.784 within a quarter).
+    constexpr double kReach = 0.75;  // box sizes from the predicted centre
+    std::vector<Component> parts(inside.size(), Component{r.x1, r.y1, r.x0, r.y0, 0});
+    for (int y = r.y0; y <= r.y1; ++y) {
+      const uint8_t* row = mask + static_cast<size_t>(y) * width;
+      for (int x = r.x0; x <= r.x1; ++x) {
+        if (!row[x]) continue;
+        int best = -1;
+        double best_d = 0;
+        for (size_t i = 0; i < inside.size(); ++i) {
+          const TrackBox& p = inside[i];
+          const double dx = (x + 0.5 - Cx(p)) / (p.x1 - p.x0), dy = (y + 0.5 - Cy(p)) / (p.y1 - p.y0);
+          if (std::fabs(dx) > kReach || std::fabs(dy) > kReach) continue;
+          if (best < 0 || dx * dx + dy * dy < best_d) best = static_cast<int>(i), best_d = dx * dx + dy * dy;
+        }
+        if (best < 0) continue;
+        Component& c = parts[best];
+        c.x0 = std::min(c.x0, x), c.x1 = std::max(c.x1, x), c.y0 = std::min(c.y0, y), c.y1 = std::max(c.y1, y);
+        ++c.area;
+      }
+    }
+    // A part with little foreground (its object left the blob) is not a region of its own.
+    for (size_t i = 0; i < parts.size(); ++i) {
+      if (parts[i].area >= std::max(4.0, 0.25 * Area(inside[i]))) out.push_back(parts[i]);
+    }
+  }
+  return out;
+}
+
+std::vector<TrackBox> Tracker::Update(const std::vector<Component>& input, const uint8_t* grey, int width,
+                                      int height, double t_s, const uint8_t* mask) {
   struct Region {
     TrackBox box;
     std::vector<float> templ;
@@ -81,6 +165,7 @@ std::vector<TrackBox> Tracker::Update(const std::vector<Component>& regions, con
     bool flat = false;
   };
   backfill_.clear();
+  const std::vector<Component> regions = SplitMerged(input, mask, width, t_s);
   std::vector<Region> now(regions.size());
   for (size_t r = 0; r < regions.size(); ++r) {
     const Component& c = regions[r];
@@ -91,9 +176,7 @@ std::vector<TrackBox> Tracker::Update(const std::vector<Component>& regions, con
   std::vector<std::tuple<float, size_t, size_t>> pairs;
   for (size_t k = 0; k < candidates_.size(); ++k) {
     Candidate& c = candidates_[k];
-    const double dt = t_s - c.last_t;
-    TrackBox p = c.box;
-    p.x0 += c.vx * dt, p.x1 += c.vx * dt, p.y0 += c.vy * dt, p.y1 += c.vy * dt;
+    const TrackBox p = c.Predicted(t_s);
     const double diag = std::max(4.0, std::hypot(p.x1 - p.x0, p.y1 - p.y0));
     const double area = (p.x1 - p.x0) * (p.y1 - p.y0);
     for (size_t r = 0; r < now.size(); ++r) {

@@ -8,15 +8,19 @@
 // protocols are scored side by side (ScoreFrame): "all" counts exactly those; "visible" adds
 // MOT-style ignore regions for smaller movers and for boxes under --min-visibility of their
 // unoccluded, untruncated projection. A "+1s delay" row scores the default model's live boxes plus
-// Detector::backfill() (validated tracks' pending boxes written back). Reported
+// Detector::backfill() (validated tracks' pending boxes written back, as --detect-only's default
+// hold of validate_s writes them). Reported
 // per model: precision, recall, MOTA (1 - (FN + FP + IDSW) / GT), ID switches, the 3D error of the
 // placed ground contact (fusion_server/core/placement.h with the true pose, against MoverAt) for
-// pedestrians within 60 m, and frames per second. MOG2 runs twice: apply() alone (the speed peer)
-// and its mask through the same noise removal, labelling and tracker (the accuracy peer).
+// pedestrians within 60 m, and frames per second (CPU time of the thread). MOG2 runs twice: apply()
+// alone (the speed peer) and its mask through the same noise removal, labelling and tracker (the
+// accuracy peer). A second table splits each method's misses and false positives (protocol
+// "visible") by cause: the validation second, merged blobs, bad boxes, no track near (Breakdown).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <iostream>
 #include <map>
 #include <memory>
@@ -42,7 +46,21 @@
 namespace ave::bench {
 namespace {
 
-using Clock = std::chrono::steady_clock;
+// Methods are timed in CPU time of this thread (the per-core cost: other processes on shared
+// cores do not count), through the std::chrono clock interface.
+struct ThreadCpuClock {
+  using duration = std::chrono::nanoseconds;
+  using rep = duration::rep;
+  using period = duration::period;
+  using time_point = std::chrono::time_point<ThreadCpuClock>;
+  static constexpr bool is_steady = true;
+  static time_point now() {
+    timespec ts{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return time_point(duration(static_cast<rep>(ts.tv_sec) * 1000000000 + ts.tv_nsec));
+  }
+};
+using Clock = ThreadCpuClock;
 
 struct DetectOptions {
   std::string scenario = "campus";
@@ -76,6 +94,21 @@ struct Truth {
   double visibility = 1;  // visible box area / projected unoccluded, untruncated box area
   bool small = false;     // fewer visible pixels than the detector's minimum region (0.1 % of the image)
   bool ignore = false;    // the "visible" protocol's ignore region: small or visibility < min_visibility
+  double age_s = 1e9;     // since the mover became counted ("visible" protocol) in this camera, after >= kGoneS not
+};
+
+// A mover not counted this long (absent or an ignore region) starts a new visibility when counted again.
+constexpr double kGoneS = 0.5;
+
+// Where the errors are (--seconds runs print it per method, protocol "visible"): each miss and
+// each false positive falls in exactly one class, tried in this order.
+struct Breakdown {
+  int64_t fn_validation = 0;  // within the first validate_s of the object's visibility (the 1 s rule)
+  int64_t fn_merged = 0;      // a track box overlaps it (IoU >= 0.05) and another object too: merged blob
+  int64_t fn_bad_box = 0;     // a track box overlaps it (IoU >= 0.05) but under 0.3, or lost the matching
+  int64_t fn_no_track = 0;    // no track box near it (lost, coasting, occluded, never validated)
+  int64_t fp_on_object = 0;   // overlaps a truth box (IoU >= 0.05): a fragment, a bad box or a merge
+  int64_t fp_nothing = 0;     // on no object (ghost, waving tree, noise)
 };
 
 // Accuracy counters of one method over all cameras.
@@ -87,6 +120,7 @@ struct Score {
   int64_t frames = 0;
   std::vector<double> errors_m;  // pedestrians within range
   std::map<std::pair<std::string, uint32_t>, uint32_t> last_match;  // (camera, mover) -> hyp id
+  Breakdown why;  // filled with the "visible" protocol
 
   double Mota() const { return gt ? 1.0 - double(fn + fp + idsw) / gt : 0; }
   double Precision() const { return tp + fp ? double(tp) / (tp + fp) : 0; }
@@ -111,6 +145,7 @@ struct FrameTruth {
   Rigid3d pose;
   double t_s;
   double max_range_m;
+  double validate_s;
 };
 
 // Scores one frame. With `use_ignore` (the "visible" protocol), truth boxes flagged `ignore` are
@@ -120,12 +155,13 @@ struct FrameTruth {
 // (a track on one is a false positive). The 3D error is collected only without it.
 void ScoreFrame(Score& s, const FrameTruth& f, const std::vector<detect::Detection>& hyps, bool use_ignore) {
   std::vector<std::tuple<double, size_t, size_t>> pairs;
+  std::vector<std::vector<double>> iou_of(hyps.size(), std::vector<double>(f.truth->size(), 0.0));  // [hyp][truth]
   for (size_t h = 0; h < hyps.size(); ++h) {
     const auto& c = hyps[h].corners;
     const Box hb{c[0][0], c[0][1], c[2][0], c[2][1]};
     for (size_t g = 0; g < f.truth->size(); ++g) {
       if (!use_ignore && (*f.truth)[g].small) continue;
-      const double iou = IoU(hb, (*f.truth)[g].box);
+      const double iou = iou_of[h][g] = IoU(hb, (*f.truth)[g].box);
       if (iou >= 0.3) pairs.emplace_back(iou, h, g);
     }
   }
@@ -155,7 +191,17 @@ void ScoreFrame(Score& s, const FrameTruth& f, const std::vector<detect::Detecti
       s.errors_m.push_back((placed->position - truth.position_m).norm());
     }
   }
-  for (char u : hu) s.fp += !u;
+  constexpr double kNear = 0.05;  // IoU at which a box is "on" an object for the breakdown
+  auto overlaps = [&](size_t h) {
+    int n = 0;
+    for (size_t g = 0; g < gu.size(); ++g) n += iou_of[h][g] >= kNear;
+    return n;
+  };
+  for (size_t h = 0; h < hu.size(); ++h) {
+    if (hu[h]) continue;
+    ++s.fp;
+    ++(overlaps(h) ? s.why.fp_on_object : s.why.fp_nothing);
+  }
   for (size_t g = 0; g < gu.size(); ++g) {
     if (!use_ignore && (*f.truth)[g].small) continue;
     if (ignored(g)) {
@@ -163,7 +209,16 @@ void ScoreFrame(Score& s, const FrameTruth& f, const std::vector<detect::Detecti
       continue;
     }
     ++s.gt;
-    s.fn += !gu[g];
+    if (gu[g]) continue;
+    ++s.fn;
+    int64_t* why = &s.why.fn_no_track;
+    for (size_t h = 0; h < hu.size(); ++h) {
+      if (iou_of[h][g] < kNear) continue;
+      why = overlaps(h) > 1 ? &s.why.fn_merged : &s.why.fn_bad_box;
+      if (why == &s.why.fn_merged) break;
+    }
+    if ((*f.truth)[g].age_s < f.validate_s - 1e-9) why = &s.why.fn_validation;
+    ++*why;
   }
 }
 
@@ -394,11 +449,12 @@ int RunDetect(const DetectOptions& o) {
     // The whole video's truth and the default model's delayed output (live boxes plus the
     // back-filled boxes of tracks validated later), scored once the camera is done.
     std::vector<std::vector<Truth>> truths(frames);
+    std::map<uint32_t, std::pair<double, double>> seen;  // mover -> (visibility start, last truth box) in s
     std::vector<std::vector<detect::Detection>> delayed(frames);
     auto frame_truth = [&](int f) {
       const double t_s = f / o.fps;
       return FrameTruth{&cam_id, &truths[f], &*scenario, &terrain, &cam.intrinsics, pipeline.PoseAt(t_s), t_s,
-                        o.max_error_range_m};
+                        o.max_error_range_m, o.detector.tracker.validate_s};
     };
     // Frames are rendered in chunks, then each method runs over the whole chunk in turn (warm,
     // the same frames, states carried across chunks); scoring happens outside the timed calls.
@@ -412,6 +468,13 @@ int RunDetect(const DetectOptions& o) {
         const double t_s = f / o.fps;
         images.push_back(pipeline.Frame(f, t_s));
         truths[f] = TruthBoxes(images.back(), protocol, scenario->world, pipeline.PoseAt(t_s), cam.intrinsics, t_s);
+        for (Truth& t : truths[f]) {
+          if (t.ignore) continue;  // visibility: counted by the "visible" protocol
+          auto [it, first] = seen.try_emplace(t.mover, t_s, t_s);
+          if (t_s - it->second.second > kGoneS) it->second.first = t_s;
+          it->second.second = t_s;
+          t.age_s = t_s - it->second.first;
+        }
         if (!(f == snapshot_frame && cam_id == cameras.front())) {
           images.back().object_id = {}, images.back().class_id = {}, images.back().depth_m = {};
         }
@@ -424,17 +487,26 @@ int RunDetect(const DetectOptions& o) {
         for (int f = c0; f < c1; ++f) {
           const sim::SimImage& image = images[f - c0];
           hyps[f - c0] = detectors[m].Process(image.bgr.data(), image.width, image.height, f / o.fps);
-          if (m == 0) backfill.insert(backfill.end(), detectors[0].backfill().begin(), detectors[0].backfill().end());
+          if (m == 0) {
+            // What `ave-agent --detect-only --latency validate_s` writes: back-fill older than the
+            // hold (a candidate that missed its last frames before validating) is dropped.
+            for (const auto& entry : detectors[0].backfill()) {
+              if (entry.first >= f / o.fps - o.detector.tracker.validate_s - 1e-6) backfill.push_back(entry);
+            }
+          }
           if (m == 0 && cam_id == cameras.front() && f == snapshot_frame) {
             Snapshot(image, truths[f], hyps[f - c0], detectors[0], o.png);
           }
           if (m == 0 && error_snapshots < o.error_snapshots && f >= snapshot_frame && f % 15 == 0) {
-            Score one;  // diagnosis (--error-snapshots): frames with a false positive or a miss
+            Score one;  // diagnosis (--error-snapshots): frames with a false positive or a miss after validation
             ScoreFrame(one, fts[f - c0], hyps[f - c0], true);
-            if (one.fp + one.fn > 0) {
+            const Breakdown& w = one.why;
+            if (one.fp + one.fn - w.fn_validation > 0) {
               Snapshot(image, truths[f], hyps[f - c0], detectors[0], o.png,
-                       cv::format("_%s_f%d_fp%lld_fn%lld", cam_id.c_str(), f, static_cast<long long>(one.fp),
-                                  static_cast<long long>(one.fn)));
+                       cv::format("_%s_f%d_fp%lld_fn%lld_merged%lld_badbox%lld_notrack%lld", cam_id.c_str(), f,
+                                  static_cast<long long>(one.fp), static_cast<long long>(one.fn),
+                                  static_cast<long long>(w.fn_merged), static_cast<long long>(w.fn_bad_box),
+                                  static_cast<long long>(w.fn_no_track)));
               ++error_snapshots;
             }
           }
@@ -487,7 +559,7 @@ int RunDetect(const DetectOptions& o) {
   scores[delayed_index].seconds = scores[0].seconds, scores[delayed_index].frames = scores[0].frames;
   const double mog2_fps = scores[mog_index].frames / std::max(mog2_apply_s, 1e-9);
   const double hd_fps = hd_frames / std::max(hd_s, 1e-9);
-  std::printf("ave-bench detect: scenario %s, cameras %s, %d frames each (%.1f s at %.1f fps), one core\n",
+  std::printf("ave-bench detect: scenario %s, cameras %s, %d frames each (%.1f s at %.1f fps), one core, CPU time of the thread\n",
               scenario->name.c_str(), o.cameras.c_str(), frames, o.seconds, o.fps);
   std::printf("protocol all (h6's): truth = every mover with >= %.1f %% of the image visible, nothing ignored; "
               "protocol visible: the same truth, plus MOT-style ignore regions (a track on one is neither TP nor FP, "
@@ -507,6 +579,20 @@ int RunDetect(const DetectOptions& o) {
                 s.Fps() / mog2_fps);
   }
   std::printf("| MOG2 apply alone | | | | | | | | | | | | | | %.0f | 1.00 |\n", mog2_fps);
+  std::printf("\nwhere the errors are (protocol visible; shares of GT visible; first match wins, IoU >= 0.05 = on an object):\n");
+  std::printf("| method | FN | in first %.1f s of visibility | merged with another object | bad box (IoU < 0.3) | no track near | FP | on an object | on nothing |\n",
+              o.detector.tracker.validate_s);
+  std::printf("| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+  for (const Score& v : visible) {
+    const Breakdown& b = v.why;
+    const double g = std::max<double>(1, v.gt);
+    std::printf("| %s | %lld (%.3f) | %lld (%.3f) | %lld (%.3f) | %lld (%.3f) | %lld (%.3f) | %lld (%.3f) | %lld (%.3f) | %lld (%.3f) |\n",
+                v.name.c_str(), static_cast<long long>(v.fn), v.fn / g, static_cast<long long>(b.fn_validation),
+                b.fn_validation / g, static_cast<long long>(b.fn_merged), b.fn_merged / g,
+                static_cast<long long>(b.fn_bad_box), b.fn_bad_box / g, static_cast<long long>(b.fn_no_track),
+                b.fn_no_track / g, static_cast<long long>(v.fp), v.fp / g, static_cast<long long>(b.fp_on_object),
+                b.fp_on_object / g, static_cast<long long>(b.fp_nothing), b.fp_nothing / g);
+  }
   std::printf("default pipeline at 1920x1080 (upscaled frames): %.1f fps over %lld frames\n", hd_fps,
               static_cast<long long>(hd_frames));
   Plot(scores, visible, mog2_fps, hd_fps, o.png);
@@ -550,9 +636,13 @@ Runner AddDetectBench(CLI::App& sub) {
   sub.add_option("--tentative-gap", d.tracker.tentative_gap_s, "tracker: gap a candidate may have and keep its age (s)")
       ->capture_default_str();
   sub.add_option("--coast", d.tracker.coast_s, "tracker: time a validated track survives unmatched (s)")->capture_default_str();
+  sub.add_option("--split-age", d.tracker.split_min_age_s,
+                 "tracker: split a region holding the predictions of objects at least this old (s; negative: never)")
+      ->capture_default_str();
   sub.add_option("--error-snapshots", options->error_snapshots,
-                 "draw up to N frames (every 15th from --snapshot on) with a false positive or a miss (visible "
-                 "protocol) to <png>_<camera>_f<frame>_fp<n>_fn<n>.png; times the default model with it")
+                 "draw up to N frames (every 15th from --snapshot on) with a false positive or a miss after the "
+                 "validation second (visible protocol) to <png>_<camera>_f<frame>_fp<n>_fn<n>_<miss classes>.png; "
+                 "times the default model with it")
       ->capture_default_str();
   sub.add_option("--snapshot", options->snapshot_s, "time (s) of the first camera's frame drawn to <png>_frame.png")
       ->capture_default_str();
