@@ -1,9 +1,11 @@
 // ave-bench render: the viewer's renderer (viewer_client/render) on this machine's software
 // renderer (Mesa llvmpipe, EGL surfaceless), issue 7:
 //   1. frame time of the quad view (browse + three camera-locked views) at --width x --height
-//      versus the number of projected cameras, with every camera still (shadow maps kept: the
-//      per-camera cost must stay flat) and with one camera turning every frame (its shadow map
-//      redone each frame);
+//      versus the number of projected cameras, with the view cache off ("before") and on, in the
+//      same run: (a) every view and camera still, new video content in every camera each frame
+//      and three people walking (as in a control room), (b) the same with the browse view flying
+//      (it changes every frame), (c) one camera turning every frame (its shadow map redone);
+//      then the difference between a cached and an exact picture of the same inputs;
 //   2. frame time and visibility error versus shadow-map size: every projector shows pure magenta,
 //      and each pixel of a full-size browse view is classified "projected" or not, against the
 //      ray-cast truth (BVH, model_store/geometry/bvh.h) of whether some camera sees that surface
@@ -37,6 +39,8 @@
 
 namespace ave::bench {
 namespace {
+
+constexpr int kWalkers = 3;
 
 struct RenderBenchOptions {
   std::string scenario = "campus";
@@ -143,6 +147,43 @@ viewer::View BrowseView(const viewer::Viewport& viewport, const scene::Synthetic
   v.view = GlViewFromWorld(*pose);
   v.projection = GlProjection(*k, 0.5, 1000);
   return v;
+}
+
+// Where the scenario's first cameras look at the ground (their optical axis's first hit): people
+// walk in small circles there, so they and the region they hide from the cameras are in view.
+std::vector<Eigen::Vector3d> WalkCentres(const scene::SyntheticCampus& world, const MeshBvh& bvh) {
+  std::vector<Eigen::Vector3d> centres;
+  for (const scene::CameraSpec& c : world.cameras) {
+    if (static_cast<int>(centres.size()) >= kWalkers) break;
+    const Eigen::Vector3d axis = c.world_from_camera.rotation * Eigen::Vector3d::UnitZ();
+    if (const std::optional<RayHit> hit = bvh.Raycast(c.world_from_camera.translation, axis)) {
+      centres.push_back(c.world_from_camera.translation + hit->distance_m * axis);
+    }
+  }
+  while (static_cast<int>(centres.size()) < kWalkers) centres.push_back(Eigen::Vector3d(2.0 * centres.size(), 0, 0));
+  return centres;
+}
+
+// The walkers at step `step`: 1.8 m people going round 3 m circles, 0.15 m per step.
+std::vector<viewer::DynamicModel> Walkers(const std::vector<Eigen::Vector3d>& centres, int step) {
+  std::vector<viewer::DynamicModel> out;
+  for (size_t k = 0; k < centres.size(); ++k) {
+    const double a = 0.05 * step + 2.0 * k;
+    viewer::DynamicModel m;
+    m.base = centres[k] + 3.0 * Eigen::Vector3d(std::cos(a), std::sin(a), 0);
+    m.heading_rad = a + M_PI / 2;
+    m.size = Eigen::Vector3d(0.5, 0.5, 1.8);
+    m.shape = viewer::ModelShape::kCylinder;
+    out.push_back(m);
+  }
+  return out;
+}
+
+void WritePng(const std::string& path, const std::vector<uint8_t>& rgba, int width, int height) {
+  cv::Mat shot(height, width, CV_8UC4, const_cast<uint8_t*>(rgba.data()));
+  cv::Mat bgr;
+  cv::cvtColor(shot, bgr, cv::COLOR_RGBA2BGR);
+  if (!cv::imwrite(path, bgr)) std::cerr << "ave-bench render: cannot write " << path << "\n";
 }
 
 struct Timing {
@@ -297,72 +338,179 @@ int RunRender(const RenderBenchOptions& o) {
               (*context)->Description().c_str(), scenario->label.c_str(), mesh.indices.size() / 3, o.grid_m, o.width,
               o.height, Load1());
 
-  // Part 1: quad view versus camera count.
+  // Part 1: quad view versus camera count, view cache off ("before") and on.
   const std::vector<BenchCamera> cameras = MakeCameras(world, max_count, false);
   std::vector<viewer::Projector> all;
   for (const BenchCamera& c : cameras) all.push_back(MakeProjector(c));
+  // Each camera's second picture (inverted): live video alternates between the two every frame.
+  std::vector<std::vector<uint8_t>> inverted;
+  for (const BenchCamera& c : cameras) {
+    inverted.push_back(c.rgba);
+    for (size_t k = 0; k < inverted.back().size(); ++k) {
+      if (k % 4 != 3) inverted.back()[k] = static_cast<uint8_t>(255 - inverted.back()[k]);
+    }
+  }
+  const MeshBvh bvh(mesh);
+  const std::vector<Eigen::Vector3d> walk_centres = WalkCentres(world, bvh);
   const std::array<viewer::Viewport, 4> quads = viewer::QuadLayout(o.width, o.height);
   PinholeIntrinsics browse_k;
   Rigid3d browse_pose;
   std::vector<viewer::View> views = {BrowseView(quads[0], world, &browse_k, &browse_pose)};
   std::vector<std::string> x_counts;
-  Series still{"all cameras still: wall ms", cv::Scalar(200, 80, 0), {}},
-      still_cpu{"all still: CPU ms (both cores)", cv::Scalar(200, 180, 120), {}},
-      moving{"one camera turning: wall ms", cv::Scalar(0, 0, 200), {}};
-  std::printf("\n| cameras projected | still: ms/frame (wall) | frames/s | CPU ms/frame | shadow maps redrawn | one turning: ms/frame | frames/s |\n");
-  std::printf("| --- | --- | --- | --- | --- | --- | --- |\n");
-  {
+  Series still_off{"still, cache off: CPU ms", cv::Scalar(120, 120, 255), {}},
+      still_on{"still, cache on: CPU ms", cv::Scalar(0, 0, 200), {}},
+      empty_on{"still, nobody walking, cache on", cv::Scalar(0, 160, 0), {}},
+      fly_off{"browse flying, cache off: CPU ms", cv::Scalar(255, 180, 120), {}},
+      fly_on{"browse flying, cache on: CPU ms", cv::Scalar(200, 80, 0), {}};
+  std::printf("\nStill: every view and camera still, new video in every camera each frame, %d people walking.\n"
+              "Flying: the same with the browse view moving every frame. Turning: camera 0 turning, still views.\n",
+              kWalkers);
+  std::printf("\n| cameras | cache | still: CPU ms/frame | wall ms | frames/s | still, nobody walking: CPU ms | frames/s | flying: CPU ms/frame | wall ms | frames/s | turning: CPU ms | frames/s | shadow maps redrawn (still) | cache builds / hits / patches (still) |\n");
+  std::printf("| ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |\n");
+  std::vector<std::unique_ptr<viewer::Renderer>> renderers;  // [0] cache off, [1] on
+  for (bool cache : {false, true}) {
     viewer::RendererOptions options;
     options.shadow_map_size = 1024;
+    options.view_cache = cache;
     absl::StatusOr<std::unique_ptr<viewer::Renderer>> renderer = viewer::Renderer::Create(options);
     if (!renderer.ok() || !(*renderer)->SetStaticMesh(mesh).ok()) {
       std::cerr << "ave-bench render: renderer: " << renderer.status().message() << "\n";
       return 1;
     }
-    viewer::Renderer& r = **renderer;
-    for (int n : counts) {
-      std::vector<viewer::Projector> some(all.begin(), all.begin() + n);
-      if (!r.SetProjectors(some).ok()) return 1;
-      views.resize(1);
-      for (int k = 0; k < 3; ++k) {
-        if (k < n) {
-          views.push_back(viewer::ViewLockedToProjector(some[k], quads[k + 1]));
-        } else {
-          viewer::View other = views[0];
-          other.viewport = quads[k + 1];
-          views.push_back(other);
-        }
+    renderers.push_back(std::move(*renderer));
+  }
+  uint64_t serial = 1;
+  int walk_step = 0;
+  // New content in every camera and the walkers one step on: what changes in a still control room.
+  auto live_frame = [&](viewer::Renderer& r, std::vector<viewer::Projector>& some) {
+    ++serial;
+    for (size_t k = 0; k < some.size(); ++k) {
+      some[k].image_rgba = serial % 2 ? std::span<const uint8_t>(cameras[k].rgba) : std::span<const uint8_t>(inverted[k]);
+      some[k].image_serial = serial;
+    }
+    (void)r.SetProjectors(some);
+    (void)r.SetDynamicModels(Walkers(walk_centres, ++walk_step));
+  };
+  for (int n : counts) {
+    std::vector<viewer::Projector> some(all.begin(), all.begin() + n);
+    views.resize(1);
+    for (int k = 0; k < 3; ++k) {
+      if (k < n) {
+        views.push_back(viewer::ViewLockedToProjector(some[k], quads[k + 1]));
+      } else {
+        viewer::View other = views[0];
+        other.viewport = quads[k + 1];
+        views.push_back(other);
       }
-      TimeFrames(r, **context, views, 2, [](int) {});
-      const Timing t_still = TimeFrames(r, **context, views, o.frames, [](int) {});
-      Timing t_moving;
+    }
+    for (size_t c = 0; c < renderers.size(); ++c) {
+      viewer::Renderer& r = *renderers[c];
+      if (!r.SetProjectors(some).ok()) return 1;
+      TimeFrames(r, **context, views, 2, [&](int) { live_frame(r, some); });
+      const viewer::RenderStats before = r.stats();
+      const Timing t_still = TimeFrames(r, **context, views, o.frames, [&](int) { live_frame(r, some); });
+      const viewer::RenderStats after = r.stats();
+      (void)r.SetDynamicModels({});
+      const Timing t_empty = TimeFrames(r, **context, views, o.frames, [&](int) {
+        live_frame(r, some);
+        (void)r.SetDynamicModels({});
+      });
+      std::vector<viewer::View> flying = views;
+      const Timing t_fly = TimeFrames(r, **context, flying, o.frames, [&](int f) {
+        live_frame(r, some);
+        Rigid3d pose = browse_pose;
+        pose.translation += Eigen::Vector3d(0.5 * (f + 1), 0.3 * (f + 1), 0);
+        flying[0].view = GlViewFromWorld(pose);
+      });
+      Timing t_turn;
       if (n > 0) {
-        t_moving = TimeFrames(r, **context, views, o.frames, [&](int f) {
+        t_turn = TimeFrames(r, **context, views, o.frames, [&](int f) {
           some[0] = MakeProjector(cameras[0], 0.002 * (f + 1));
-          some[0].image_rgba = {};
-          (void)r.SetProjectors(some);
+          live_frame(r, some);
         });
         some[0] = MakeProjector(cameras[0]);
         (void)r.SetProjectors(some);
       } else {
-        t_moving = t_still;
+        t_turn = t_still;
       }
-      std::printf("| %d | %.1f | %.1f | %.1f | %llu | %.1f | %.1f |\n", n, t_still.wall_ms, 1000 / t_still.wall_ms,
-                  t_still.cpu_ms, static_cast<unsigned long long>(t_still.shadow_renders), t_moving.wall_ms,
-                  1000 / t_moving.wall_ms);
+      std::printf("| %d | %s | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %llu | %llu / %llu / %llu |\n",
+                  n, c ? "on" : "off", t_still.cpu_ms, t_still.wall_ms, 1000 / t_still.wall_ms, t_empty.cpu_ms,
+                  1000 / t_empty.wall_ms, t_fly.cpu_ms, t_fly.wall_ms,
+                  1000 / t_fly.wall_ms, t_turn.cpu_ms, 1000 / t_turn.wall_ms,
+                  static_cast<unsigned long long>(t_still.shadow_renders),
+                  static_cast<unsigned long long>(after.view_cache_builds - before.view_cache_builds),
+                  static_cast<unsigned long long>(after.view_cache_hits - before.view_cache_hits),
+                  static_cast<unsigned long long>(after.view_cache_patches - before.view_cache_patches));
       std::fflush(stdout);
-      x_counts.push_back(std::to_string(n));
-      still.y.push_back(t_still.wall_ms);
-      still_cpu.y.push_back(t_still.cpu_ms);
-      moving.y.push_back(t_moving.wall_ms);
+      (c ? still_on : still_off).y.push_back(t_still.cpu_ms);
+      if (c) empty_on.y.push_back(t_empty.cpu_ms);
+      (c ? fly_on : fly_off).y.push_back(t_fly.cpu_ms);
+    }
+    x_counts.push_back(std::to_string(n));
+  }
+
+  // Cached against exact: the same inputs (still views, walkers) into the uncached renderer and
+  // cached ones keeping 4 (the default) and 8 entries per pixel.
+  {
+    viewer::RendererOptions options;
+    options.shadow_map_size = 1024;
+    options.view_cache_entries = 8;
+    absl::StatusOr<std::unique_ptr<viewer::Renderer>> eight = viewer::Renderer::Create(options);
+    if (!eight.ok() || !(*eight)->SetStaticMesh(mesh).ok()) {
+      std::cerr << "ave-bench render: renderer: " << eight.status().message() << "\n";
+      return 1;
+    }
+    renderers.push_back(std::move(*eight));
+  }
+  std::printf("\n| cameras | cached (4 entries) vs exact: mean abs difference (levels) | max | pixels > 2 levels | 8 entries: mean | max | pixels > 2 levels |\n");
+  std::printf("| ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+  std::vector<int> compared = {std::min(3, max_count)};
+  if (max_count > 3) compared.push_back(max_count);
+  for (int n : compared) {
+    if (n == 0) continue;
+    std::vector<viewer::Projector> some(all.begin(), all.begin() + n);
+    views.resize(1);
+    for (int k = 0; k < 3; ++k) views.push_back(viewer::ViewLockedToProjector(some[k % std::max(1, n)], quads[k + 1]));
+    std::vector<std::vector<uint8_t>> pictures;
+    for (const std::unique_ptr<viewer::Renderer>& r : renderers) {
+      for (viewer::Projector& p : some) p.image_serial = ++serial;
+      (void)r->SetProjectors(some);
+      (void)r->SetDynamicModels(Walkers(walk_centres, walk_step));
+      TimeFrames(*r, **context, views, 3, [](int) {});  // the last frame is drawn from the cache
+      pictures.push_back(*(*context)->ReadPixels());
+    }
+    std::printf("| %d", n);
+    for (size_t c = 1; c < pictures.size(); ++c) {
+      double sum = 0;
+      int max_diff = 0;
+      size_t over = 0;
+      const size_t pixels = pictures[0].size() / 4;
+      for (size_t k = 0; k < pixels; ++k) {
+        int worst = 0;
+        for (int ch = 0; ch < 3; ++ch) {
+          const int d = std::abs(int(pictures[0][4 * k + ch]) - int(pictures[c][4 * k + ch]));
+          sum += d;
+          worst = std::max(worst, d);
+        }
+        max_diff = std::max(max_diff, worst);
+        over += worst > 2;
+      }
+      std::printf(" | %.3f | %d | %.3f %%", sum / (3.0 * pixels), max_diff, 100.0 * over / pixels);
+    }
+    std::printf(" |\n");
+    std::fflush(stdout);
+    if (n == std::min(3, max_count)) WritePng("render_bench_quad.png", pictures[1], o.width, o.height);
+    if (n == max_count) {
+      WritePng("render_bench_quad_exact.png", pictures[0], o.width, o.height);
+      WritePng("render_bench_quad_cached.png", pictures[1], o.width, o.height);
     }
   }
+  renderers.clear();
 
   // Part 2: shadow-map size versus visibility error (full-size browse view, magenta video).
   const std::vector<BenchCamera> magenta = MakeCameras(world, o.shadow_cameras, true);
   std::vector<viewer::Projector> magenta_projectors;
   for (const BenchCamera& c : magenta) magenta_projectors.push_back(MakeProjector(c));
-  const MeshBvh bvh(mesh);
   std::vector<std::string> x_sizes;
   Series size_ms{"quad view ms/frame (wall)", cv::Scalar(200, 80, 0), {}};
   Series size_error{"visibility error, % of pixels", cv::Scalar(0, 0, 200), {}};
@@ -394,20 +542,15 @@ int RunRender(const RenderBenchOptions& o) {
     std::printf("| %d | %.1f | %.2f %% of %d pixels | %.1f | %.0f | %.3f |\n", size, t.wall_ms, 100 * vis.error, vis.pixels,
                 t_full.wall_ms, vis.truth_ms, t_full.wall_ms / vis.truth_ms);
     std::fflush(stdout);
-    if (size == 1024) {
-      cv::Mat shot(o.height, o.width, CV_8UC4, const_cast<uint8_t*>(rgba.data()));
-      cv::Mat bgr;
-      cv::cvtColor(shot, bgr, cv::COLOR_RGBA2BGR);
-      cv::imwrite("render_bench_visibility.png", bgr);
-    }
+    if (size == 1024) WritePng("render_bench_visibility.png", rgba, o.width, o.height);
     x_sizes.push_back(std::to_string(size));
     size_ms.y.push_back(t.wall_ms);
     size_error.y.push_back(100 * vis.error);
   }
 
   cv::Mat plot(420, 1200, CV_8UC3, cv::Scalar(255, 255, 255));
-  DrawPanel(plot, {0, 0, 600, 420}, "quad view " + std::to_string(o.width) + "x" + std::to_string(o.height) + ": ms per frame vs cameras projected",
-            x_counts, {still, still_cpu, moving}, "cameras projected");
+  DrawPanel(plot, {0, 0, 600, 420}, "quad view " + std::to_string(o.width) + "x" + std::to_string(o.height) + ": CPU ms per frame vs cameras projected",
+            x_counts, {still_off, still_on, empty_on, fly_off, fly_on}, "cameras projected");
   DrawPanel(plot, {600, 0, 300, 420}, "ms/frame vs shadow map", x_sizes, {size_ms}, "shadow map size (px)");
   DrawPanel(plot, {900, 0, 300, 420}, "visibility error %", x_sizes, {size_error}, "shadow map size (px)");
   if (!cv::imwrite(o.plot, plot)) {

@@ -511,7 +511,9 @@ absl::Status RunViewer(const ViewerOptions& options) {
                     << 1e3 * draw_s / (frames - 1) << " ms per frame, read-back included); renderer: "
                     << (*renderer)->stats().shadow_map_renders << " shadow-map renders, "
                     << (*renderer)->stats().dynamic_shadow_updates << " dynamic shadow updates, "
-                    << (*renderer)->stats().video_uploads << " video uploads";
+                    << (*renderer)->stats().video_uploads << " video uploads, view cache: "
+                    << (*renderer)->stats().view_cache_builds << " builds, " << (*renderer)->stats().view_cache_hits
+                    << " hits, " << (*renderer)->stats().views_uncached << " uncached views";
     }
     if (!options.snapshot_path.empty()) {
       if (absl::Status s = SaveFramebuffer(*context, options.snapshot_path); !s.ok()) return s;

@@ -141,9 +141,14 @@ absl::StatusOr<std::unique_ptr<HeadlessContext>> CreateHeadlessContext(int width
   if (!eglChooseConfig(impl->display, config_attribs, &config, 1, &config_count) || config_count < 1) {
     return absl::UnavailableError("EGL: no config with desktop OpenGL: " + EglErrorText());
   }
-  const EGLint context_attribs[] = {EGL_CONTEXT_MAJOR_VERSION, 3, EGL_CONTEXT_MINOR_VERSION, 3,
-                                    EGL_CONTEXT_OPENGL_PROFILE_MASK, EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT, EGL_NONE};
-  impl->context = eglCreateContext(impl->display, config, EGL_NO_CONTEXT, context_attribs);
+  // 4.3 core where the driver has it (the renderer's view cache needs it), else 3.3 core.
+  for (const EGLint version : {43, 33}) {
+    const EGLint context_attribs[] = {EGL_CONTEXT_MAJOR_VERSION, version / 10, EGL_CONTEXT_MINOR_VERSION,
+                                      version % 10, EGL_CONTEXT_OPENGL_PROFILE_MASK,
+                                      EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT, EGL_NONE};
+    impl->context = eglCreateContext(impl->display, config, EGL_NO_CONTEXT, context_attribs);
+    if (impl->context != EGL_NO_CONTEXT) break;
+  }
   if (impl->context == EGL_NO_CONTEXT) {
     return absl::UnavailableError("EGL: cannot create an OpenGL 3.3 core context: " + EglErrorText());
   }
@@ -227,11 +232,16 @@ absl::StatusOr<std::unique_ptr<WindowContext>> CreateWindowContext(const WindowO
     ++g_glfw_users;
   }
   auto impl = std::make_unique<WindowContext::Impl>();  // from here on its destructor releases GLFW
-  glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 3);
-  glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 3);
-  glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
-  glfwWindowHint(GLFW_VISIBLE, options.visible ? GLFW_TRUE : GLFW_FALSE);
-  impl->window = glfwCreateWindow(options.width, options.height, options.title.c_str(), nullptr, nullptr);
+  // 4.3 core where the driver has it (the renderer's view cache needs it), else 3.3 core.
+  for (const int version : {43, 33}) {
+    glfwDefaultWindowHints();
+    glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, version / 10);
+    glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, version % 10);
+    glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
+    glfwWindowHint(GLFW_VISIBLE, options.visible ? GLFW_TRUE : GLFW_FALSE);
+    impl->window = glfwCreateWindow(options.width, options.height, options.title.c_str(), nullptr, nullptr);
+    if (impl->window != nullptr) break;
+  }
   if (impl->window == nullptr) {
     const char* description = nullptr;
     glfwGetError(&description);

@@ -19,6 +19,12 @@ std::string RendererOptions::Check() const {
   if (!std::isfinite(retention_turn_deg) || retention_turn_deg <= 0) return "retention_turn_deg must be finite and > 0";
   if (!std::isfinite(retention_move_m) || retention_move_m <= 0) return "retention_move_m must be finite and > 0";
   if (!std::isfinite(sky_radius_m) || sky_radius_m < 0) return "sky_radius_m must be finite and >= 0";
+  if (view_cache_entries < 1 || view_cache_entries > kMaxViewCacheEntries) {
+    return "view_cache_entries must be in 1.." + std::to_string(kMaxViewCacheEntries);
+  }
+  if (!std::isfinite(still_pose_tolerance_px) || still_pose_tolerance_px < 0 || still_pose_tolerance_px > 10) {
+    return "still_pose_tolerance_px must be in [0, 10]";
+  }
   if (const std::string why = display.Check(); !why.empty()) return "display." + why;
   return {};
 }

@@ -29,6 +29,8 @@ constexpr GLint kShadowUnit = 4;
 constexpr GLint kLiveUnit = 5;
 constexpr GLint kRetainedUnit = 6;
 constexpr GLint kFadeUnit = 7;
+constexpr GLint kMappingUnit = 8;
+constexpr GLuint kMappingImageUnit = 0;
 // Depth bias of the shadow pass, in addition to the normal offset of the projector shader: the
 // slope term absorbs the depth change across one texel on grazing ground (paper section 8).
 constexpr float kShadowSlopeBias = 1.5f;
@@ -312,6 +314,25 @@ double DistortionMargin(const Projector& p) {
   return std::clamp(1 + 2 * sum, 1.0, 2.0);
 }
 
+// How far (pixels of a layer_width x layer_height image) the image centre and corners at depth_m
+// in front of `from` move when seen through `to` instead: 0 for the same pose.
+double ReprojectionShiftPx(const Projector& from, const Projector& to, double depth_m, int layer_width,
+                           int layer_height) {
+  const Eigen::Matrix4d local_from_eye = from.view.inverse(), eye_from_clip = from.projection.inverse();
+  std::array<Eigen::Vector3d, 5> points;
+  const std::array<Eigen::Vector3d, 4> corners = FrustumCorners(local_from_eye, eye_from_clip, 1, depth_m);
+  std::copy(corners.begin(), corners.end(), points.begin());
+  points[4] = (local_from_eye * Eigen::Vector4d(0, 0, -depth_m, 1)).head<3>();
+  double shift = 0;
+  for (const Eigen::Vector3d& x : points) {
+    const Eigen::Vector4d a = from.projection * from.view * x.homogeneous(), b = to.projection * to.view * x.homogeneous();
+    if (!(b.w() > 1e-9)) return std::numeric_limits<double>::infinity();
+    const Eigen::Vector2d d = a.head<2>() / a.w() - b.head<2>() / b.w();
+    shift = std::max(shift, Eigen::Vector2d(0.5 * layer_width * d.x(), 0.5 * layer_height * d.y()).norm());
+  }
+  return shift;
+}
+
 bool MatricesFinite(const Projector& p) {
   return p.view.allFinite() && p.projection.allFinite() && p.position.allFinite();
 }
@@ -330,6 +351,7 @@ struct ShadowSlot {
   GlMatrix clip_from_local{};
   uint64_t static_version = 0;
   uint64_t dynamic_version = 0;
+  bool dynamic_has_models = false;  // the dynamic layer holds some model (else it equals the static one)
 };
 
 // One layer set: a shadow-map array, and optionally a second one with dynamic models added.
@@ -597,15 +619,85 @@ class Uniforms {
   std::vector<std::pair<std::string_view, GLint>> locations_;
 };
 
+// A program with its uniform locations.
+struct Program {
+  GLuint id = 0;
+  Uniforms u;
+};
+
+// One projector pass of a frame: a live layer or a retained snapshot, with its frustum volume's
+// corners (36 volume vertices each, in pass order).
+struct ProjectorPass {
+  const Projector* projector;
+  int layer;
+  bool retained;
+  float fade;
+  std::array<Eigen::Vector3d, 8> corners;
+};
+
+// A screen rectangle in framebuffer pixels (GL convention, like Viewport).
+bool Overlap(const Viewport& a, const Viewport& b) {
+  return a.x < b.x + b.width && b.x < a.x + a.width && a.y < b.y + b.height && b.y < a.y + a.height;
+}
+
+Viewport Union(const Viewport& a, const Viewport& b) {
+  const int x0 = std::min(a.x, b.x), y0 = std::min(a.y, b.y);
+  const int x1 = std::max(a.x + a.width, b.x + b.width), y1 = std::max(a.y + a.height, b.y + b.height);
+  return Viewport{x0, y0, x1 - x0, y1 - y0};
+}
+
+// The pixels of `viewport` that the convex hull of the points may cover in a view with this
+// matrix, padded by two pixels. Points are homogeneous: w = 0 is a direction, standing for the
+// whole ray towards it from the other points (its image ends at the direction's vanishing point).
+// The whole viewport when a point or direction lies behind the eye (it cannot be bounded there).
+std::optional<Viewport> ScreenRect(const std::vector<Eigen::Vector4d>& points, const Eigen::Matrix4d& clip_from_local,
+                                   const Viewport& viewport) {
+  Eigen::Vector2d lo = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const Eigen::Vector4d& p : points) {
+    const Eigen::Vector4d clip = clip_from_local * p;
+    if (!(clip.w() > 1e-6)) return viewport;
+    const Eigen::Vector2d ndc = clip.head<2>() / clip.w();
+    lo = lo.cwiseMin(ndc);
+    hi = hi.cwiseMax(ndc);
+  }
+  constexpr double kPadPixels = 2;
+  const double x0 = viewport.x + (0.5 * lo.x() + 0.5) * viewport.width - kPadPixels;
+  const double x1 = viewport.x + (0.5 * hi.x() + 0.5) * viewport.width + kPadPixels;
+  const double y0 = viewport.y + (0.5 * lo.y() + 0.5) * viewport.height - kPadPixels;
+  const double y1 = viewport.y + (0.5 * hi.y() + 0.5) * viewport.height + kPadPixels;
+  const int ix0 = static_cast<int>(std::max<double>(viewport.x, std::floor(x0)));
+  const int iy0 = static_cast<int>(std::max<double>(viewport.y, std::floor(y0)));
+  const int ix1 = static_cast<int>(std::min<double>(viewport.x + viewport.width, std::ceil(x1)));
+  const int iy1 = static_cast<int>(std::min<double>(viewport.y + viewport.height, std::ceil(y1)));
+  if (ix1 <= ix0 || iy1 <= iy0) return std::nullopt;
+  return Viewport{ix0, iy0, ix1 - ix0, iy1 - iy0};
+}
+
+// What a view's cached G-buffer and mapping were built from (exact comparison: any change rebuilds).
+struct ViewCache {
+  bool valid = false;
+  Viewport viewport;
+  std::vector<double> signature;
+  std::vector<double> last_signature;  // of the view's previous frame, cached or not
+  double built_s = 0;  // Now() when the retained targets were drawn
+  bool any_live = false, any_retained = false;
+  std::vector<Viewport> patches;  // rectangles drawn exactly in the last frame (working G-buffer)
+  uint64_t last_frame = 0;        // RenderStats::frames after the Render that last drew the view
+};
+
+void AppendMatrix(const Eigen::Matrix4d& m, std::vector<double>& out) { out.insert(out.end(), m.data(), m.data() + 16); }
+
 }  // namespace
 
 struct Renderer::Impl {
   RendererOptions options;
-  GLuint gbuffer_program = 0, shadow_program = 0, line_program = 0, projector_program = 0;
-  // Resolve variants, index any_live + 2 * any_retained (resolve.frag.glsl: LIVE, RETAINED).
-  std::array<GLuint, 4> resolve_programs{};
-  Uniforms gbuffer_u, projector_u;
-  std::array<Uniforms, 4> resolve_u;
+  GLuint gbuffer_program = 0, shadow_program = 0, line_program = 0;
+  // Projector passes: colour accumulation, and the view cache's mapping build (MAPPING).
+  Program projector, mapping;
+  // Resolve variants, index any_live + 2 * any_retained + 4 * cached + 8 * shadowed
+  // (resolve.frag.glsl: LIVE, RETAINED, CACHED, SHADOWED; shadowed only with cached and live).
+  std::array<Program, 16> resolve;
+  Uniforms gbuffer_u;
   GLint shadow_clip_from_local = -1, line_clip_from_local = -1;
 
   MeshBuffers static_mesh, dynamic_mesh, sky_mesh, lines, volumes;
@@ -622,6 +714,13 @@ struct Renderer::Impl {
   GLuint gbuffer_color = 0, gbuffer_normal = 0, gbuffer_depth = 0, accum_live = 0, accum_retained = 0, accum_fade = 0;
   int target_width = 0, target_height = 0;
   float max_line_width = 1;
+  // View cache (RendererOptions::view_cache), framebuffer-sized and shared by views that do not
+  // overlap: the static G-buffer, retained accumulation, and view_cache_entries mapping layers.
+  bool cache_supported = false;  // GL 4.3+
+  GLuint fbo_cache_gbuffer = 0, fbo_cache_accum = 0, fbo_mapping = 0;
+  GLuint cache_color = 0, cache_normal = 0, cache_depth = 0, cache_retained = 0, cache_fade = 0, mapping_array = 0;
+  std::vector<ViewCache> view_caches;  // by the view's index in Render's views
+  std::vector<Bounds> model_bounds;    // per dynamic model
 
   std::vector<Projector> projectors;  // image_rgba cleared: only valid during SetProjectors
   std::vector<std::array<Eigen::Vector3d, 16>> frustums;
@@ -640,6 +739,10 @@ struct Renderer::Impl {
 
   ~Impl() {
     for (MeshBuffers* m : {&static_mesh, &dynamic_mesh, &sky_mesh, &lines, &volumes}) m->Destroy();
+    const GLuint cache_textures[] = {cache_color, cache_normal, cache_depth, cache_retained, cache_fade, mapping_array};
+    glDeleteTextures(6, cache_textures);
+    const GLuint cache_fbos[] = {fbo_cache_gbuffer, fbo_cache_accum, fbo_mapping};
+    glDeleteFramebuffers(3, cache_fbos);
     glDeleteVertexArrays(1, &empty_vao);
     live_shadows.Destroy();
     retained_shadows.Destroy();
@@ -648,11 +751,11 @@ struct Renderer::Impl {
     glDeleteTextures(9, textures);
     const GLuint fbos[] = {fbo_video_src, fbo_video_dst, fbo_shadow_src, fbo_shadow_dst, fbo_gbuffer, fbo_accum};
     glDeleteFramebuffers(6, fbos);
-    for (GLuint program : {gbuffer_program, shadow_program, line_program, projector_program}) {
+    for (GLuint program : {gbuffer_program, shadow_program, line_program, projector.id, mapping.id}) {
       if (program) glDeleteProgram(program);
     }
-    for (GLuint program : resolve_programs) {
-      if (program) glDeleteProgram(program);
+    for (const Program& program : resolve) {
+      if (program.id) glDeleteProgram(program.id);
     }
   }
 
@@ -688,7 +791,48 @@ struct Renderer::Impl {
     if (absl::Status s = CheckFramebuffer(GL_FRAMEBUFFER, "projector accumulation"); !s.ok()) return s;
     target_width = width;
     target_height = height;
+    if (absl::Status s = EnsureCacheTargets(width, height); !s.ok()) return s;
     return CheckGl("render targets");
+  }
+
+  bool CacheOn() const { return options.view_cache && cache_supported; }
+
+  absl::Status EnsureCacheTargets(int width, int height) {
+    view_caches.clear();
+    const GLuint old[] = {cache_color, cache_normal, cache_depth, cache_retained, cache_fade, mapping_array};
+    glDeleteTextures(6, old);
+    cache_color = cache_normal = cache_depth = cache_retained = cache_fade = mapping_array = 0;
+    if (!CacheOn()) return absl::OkStatus();
+    cache_color = MakeTexture2D(GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE, width, height);
+    cache_normal = MakeTexture2D(GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE, width, height);
+    cache_depth = MakeTexture2D(GL_DEPTH_COMPONENT32F, GL_DEPTH_COMPONENT, GL_FLOAT, width, height);
+    cache_retained = MakeTexture2D(GL_RGBA32F, GL_RGBA, GL_FLOAT, width, height);
+    cache_fade = MakeTexture2D(GL_R32F, GL_RED, GL_FLOAT, width, height);
+    glGenTextures(1, &mapping_array);
+    glBindTexture(GL_TEXTURE_2D_ARRAY, mapping_array);
+    glTexStorage3D(GL_TEXTURE_2D_ARRAY, 1, GL_RGBA32F, width, height, options.view_cache_entries);
+    glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    glBindFramebuffer(GL_FRAMEBUFFER, fbo_cache_gbuffer);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, cache_color, 0);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT1, GL_TEXTURE_2D, cache_normal, 0);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_TEXTURE_2D, cache_depth, 0);
+    const GLenum gbuffers[] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1};
+    glDrawBuffers(2, gbuffers);
+    if (absl::Status s = CheckFramebuffer(GL_FRAMEBUFFER, "view cache G-buffer"); !s.ok()) return s;
+    glBindFramebuffer(GL_FRAMEBUFFER, fbo_cache_accum);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT1, GL_TEXTURE_2D, cache_retained, 0);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT2, GL_TEXTURE_2D, cache_fade, 0);
+    if (absl::Status s = CheckFramebuffer(GL_FRAMEBUFFER, "view cache retained"); !s.ok()) return s;
+    glBindFramebuffer(GL_FRAMEBUFFER, fbo_mapping);
+    std::array<GLenum, kMaxViewCacheEntries> entries{};
+    for (int k = 0; k < options.view_cache_entries; ++k) {
+      glFramebufferTextureLayer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0 + k, mapping_array, 0, k);
+      entries[k] = GL_COLOR_ATTACHMENT0 + k;
+    }
+    glDrawBuffers(options.view_cache_entries, entries.data());
+    if (absl::Status s = CheckFramebuffer(GL_FRAMEBUFFER, "view cache mapping"); !s.ok()) return s;
+    return CheckGl("view cache targets");
   }
 
   // Grows a video array to at least `needed` layers, keeping the frames it holds.
@@ -808,6 +952,15 @@ struct Renderer::Impl {
         !slot.valid || slot.clip_from_local != clip_from_local || slot.static_version != static_version;
     const bool dynamic_dirty = with_dynamic && (static_dirty || slot.dynamic_version != dynamic_version);
     if (!static_dirty && !dynamic_dirty) return absl::OkStatus();
+    const Eigen::Matrix4d shadow_clip = Eigen::Map<const Eigen::Matrix4f>(clip_from_local.data()).cast<double>();
+    const bool models_inside = with_dynamic && std::any_of(model_bounds.begin(), model_bounds.end(), [&](const Bounds& b) {
+                                 return VolumeMayBeVisible(b.Corners(), shadow_clip);
+                               });
+    if (!static_dirty && !slot.dynamic_has_models && !models_inside) {
+      // No model was or is in this projector's view: its dynamic layer is still the static one.
+      slot.dynamic_version = dynamic_version;
+      return absl::OkStatus();
+    }
     if (!state_set) {
       ApplyPassState(Pass::kShadow);
       glViewport(0, 0, size, size);
@@ -820,7 +973,7 @@ struct Renderer::Impl {
     if (absl::Status s = CheckFramebuffer(GL_FRAMEBUFFER, "static shadow map"); !s.ok()) return s;
     if (static_dirty) {
       glClear(GL_DEPTH_BUFFER_BIT);
-      DrawStaticChunks(Eigen::Map<const Eigen::Matrix4f>(clip_from_local.data()).cast<double>());
+      DrawStaticChunks(shadow_clip);
       ++counter;
       ReadShadowExtent(shadow_projection, slot);
     }
@@ -831,6 +984,7 @@ struct Renderer::Impl {
       glBlitFramebuffer(0, 0, size, size, 0, 0, size, size, GL_DEPTH_BUFFER_BIT, GL_NEAREST);
       dynamic_mesh.Draw(GL_TRIANGLES);
       ++stats.dynamic_shadow_updates;
+      slot.dynamic_has_models = models_inside;
     }
     slot.valid = true;
     slot.clip_from_local = clip_from_local;
@@ -903,7 +1057,9 @@ struct Renderer::Impl {
     return {centre, radius};
   }
 
-  void DrawGbuffer(const View& view) {
+  // The static model and sky (with_static) and the dynamic models (with_dynamic) into the bound
+  // G-buffer.
+  void DrawGbuffer(const View& view, bool with_static, bool with_dynamic) {
     ApplyPassState(Pass::kGbuffer);
     glUseProgram(gbuffer_program);
     const Uniforms& u = gbuffer_u;
@@ -913,11 +1069,11 @@ struct Renderer::Impl {
     glUniform1f(u["u_ambient"], options.ambient);
     glUniform1f(u["u_diffuse"], options.diffuse);
     glUniform3f(u["u_sky_color"], view.clear_color.x(), view.clear_color.y(), view.clear_color.z());
-    DrawStaticChunks(view.projection * view.view);
+    if (with_static) DrawStaticChunks(view.projection * view.view);
     glEnable(GL_CULL_FACE);
     glCullFace(GL_BACK);
-    dynamic_mesh.Draw(GL_TRIANGLES);
-    if (options.display.sky) sky_mesh.Draw(GL_TRIANGLES);
+    if (with_dynamic) dynamic_mesh.Draw(GL_TRIANGLES);
+    if (with_static && options.display.sky) sky_mesh.Draw(GL_TRIANGLES);
   }
 
   // The chunks of the static model that may show in a view with this matrix, consecutive ones
@@ -945,29 +1101,32 @@ struct Renderer::Impl {
     flush();
   }
 
-  void BindProjectorInputs(const View& view) {
-    glUseProgram(projector_program);
-    const Uniforms& u = projector_u;
-    glUniform1i(u["u_gbuffer_normal"], kGbufferNormalUnit);
-    glUniform1i(u["u_gbuffer_depth"], kGbufferDepthUnit);
-    glUniform1i(u["u_video"], kVideoUnit);
-    glUniform1i(u["u_shadow"], kShadowUnit);
+  // A local point (homogeneous) from (window x, y in framebuffer pixels, NDC z, 1) of the view.
+  static Eigen::Matrix4d LocalFromWindow(const View& view) {
     const Viewport& v = view.viewport;
-    const Eigen::Matrix4d clip_from_local = view.projection * view.view;
-    glUniformMatrix4fv(u["u_view_clip_from_local"], 1, GL_FALSE, ToGlArray(clip_from_local).data());
-    // Window x, y (pixels of the framebuffer) to the view's NDC; z stays NDC (the shader's 2 d - 1).
     Eigen::Matrix4d ndc_from_window = Eigen::Matrix4d::Identity();
     ndc_from_window(0, 0) = 2.0 / v.width;
     ndc_from_window(0, 3) = -1 - 2.0 * v.x / v.width;
     ndc_from_window(1, 1) = 2.0 / v.height;
     ndc_from_window(1, 3) = -1 - 2.0 * v.y / v.height;
-    const Eigen::Matrix4d local_from_window = clip_from_local.inverse() * ndc_from_window;
-    glUniformMatrix4fv(u["u_local_from_window"], 1, GL_FALSE, ToGlArray(local_from_window).data());
+    return (view.projection * view.view).inverse() * ndc_from_window;
+  }
+
+  // `program` reads the G-buffer textures `normal` and `depth` (the working or the cached one).
+  void BindProjectorInputs(const View& view, const Program& program, GLuint normal, GLuint depth) {
+    glUseProgram(program.id);
+    const Uniforms& u = program.u;
+    glUniform1i(u["u_gbuffer_normal"], kGbufferNormalUnit);
+    glUniform1i(u["u_gbuffer_depth"], kGbufferDepthUnit);
+    glUniform1i(u["u_video"], kVideoUnit);
+    glUniform1i(u["u_shadow"], kShadowUnit);
+    glUniformMatrix4fv(u["u_view_clip_from_local"], 1, GL_FALSE, ToGlArray(view.projection * view.view).data());
+    glUniformMatrix4fv(u["u_local_from_window"], 1, GL_FALSE, ToGlArray(LocalFromWindow(view)).data());
     const DisplayOptions& display = options.display;
     glUniform1f(u["u_feather"], static_cast<float>(display.seam_feather));
     glUniform1i(u["u_best_view"], display.overlap == OverlapPolicy::kBestView ? 1 : 0);
-    BindTexture(kGbufferNormalUnit, GL_TEXTURE_2D, gbuffer_normal);
-    BindTexture(kGbufferDepthUnit, GL_TEXTURE_2D, gbuffer_depth);
+    BindTexture(kGbufferNormalUnit, GL_TEXTURE_2D, normal);
+    BindTexture(kGbufferDepthUnit, GL_TEXTURE_2D, depth);
   }
 
   static void BindTexture(GLint unit, GLenum target, GLuint texture) {
@@ -976,9 +1135,8 @@ struct Renderer::Impl {
     glActiveTexture(GL_TEXTURE0);
   }
 
-  void DrawProjectorPass(const Projector& p, int layer, GLint first_vertex, bool last_wins, float fade,
-                         float weight_scale) {
-    const Uniforms& u = projector_u;
+  void DrawProjectorPass(const Uniforms& u, const Projector& p, int layer, GLint first_vertex, bool last_wins,
+                         float fade, float weight_scale) {
     const ProjectorGl g = MakeProjectorGl(p, options.shadow_map_size);
     glUniformMatrix4fv(u["u_clip_from_local"], 1, GL_FALSE, g.clip_from_local.data());
     glUniformMatrix4fv(u["u_shadow_clip_from_local"], 1, GL_FALSE, g.shadow_clip_from_local.data());
@@ -1029,11 +1187,16 @@ struct Renderer::Impl {
     }
   }
 
-  void Resolve(const View& view, bool any_live, bool any_retained) {
+  // cache: resolve from a view cache (its G-buffer, retained targets and mapping), else from the
+  // working G-buffer and accumulation targets.
+  // shadowed (with a cache and live passes): cached entries are tested against the shadow maps
+  // with the dynamic models (the layers' matrices come from `passes`).
+  void Resolve(const View& view, bool any_live, bool any_retained, const ViewCache* cache = nullptr,
+               const std::vector<ProjectorPass>* shadowed = nullptr) {
     ApplyPassState(Pass::kResolve);
-    const int variant = (any_live ? 1 : 0) + (any_retained ? 2 : 0);
-    glUseProgram(resolve_programs[variant]);
-    const Uniforms& u = resolve_u[variant];
+    const int variant = (any_live ? 1 : 0) + (any_retained ? 2 : 0) + (cache ? 4 : 0) + (shadowed ? 8 : 0);
+    glUseProgram(resolve[variant].id);
+    const Uniforms& u = resolve[variant].u;
     glUniform1i(u["u_gbuffer_color"], kGbufferColorUnit);
     glUniform1i(u["u_gbuffer_depth"], kGbufferDepthUnit);
     glUniform1i(u["u_live"], kLiveUnit);
@@ -1041,13 +1204,335 @@ struct Renderer::Impl {
     glUniform1i(u["u_fade"], kFadeUnit);
     glUniform3f(u["u_clear_color"], view.clear_color.x(), view.clear_color.y(), view.clear_color.z());
     glUniform1i(u["u_tint_by_age"], options.display.tint_by_age ? 1 : 0);
-    BindTexture(kGbufferColorUnit, GL_TEXTURE_2D, gbuffer_color);
-    BindTexture(kGbufferDepthUnit, GL_TEXTURE_2D, gbuffer_depth);
-    BindTexture(kLiveUnit, GL_TEXTURE_2D, accum_live);
-    BindTexture(kRetainedUnit, GL_TEXTURE_2D, accum_retained);
-    BindTexture(kFadeUnit, GL_TEXTURE_2D, accum_fade);
+    const double half_life = options.display.retention_half_life_s;
+    const double elapsed = cache ? std::max(0.0, Now() - cache->built_s) : 0.0;
+    glUniform1f(u["u_fade_scale"], half_life > 0 ? static_cast<float>(std::pow(0.5, elapsed / half_life)) : 0.0f);
+    BindTexture(kGbufferColorUnit, GL_TEXTURE_2D, cache ? cache_color : gbuffer_color);
+    BindTexture(kGbufferDepthUnit, GL_TEXTURE_2D, cache ? cache_depth : gbuffer_depth);
+    BindTexture(kRetainedUnit, GL_TEXTURE_2D, cache ? cache_retained : accum_retained);
+    BindTexture(kFadeUnit, GL_TEXTURE_2D, cache ? cache_fade : accum_fade);
+    if (cache) {
+      glUniform1i(u["u_mapping"], kMappingUnit);
+      glUniform1i(u["u_video"], kVideoUnit);
+      glUniform1i(u["u_last_wins"], options.display.overlap == OverlapPolicy::kLastWins ? 1 : 0);
+      BindTexture(kMappingUnit, GL_TEXTURE_2D_ARRAY, mapping_array);
+      BindTexture(kVideoUnit, GL_TEXTURE_2D_ARRAY, video_array);
+    } else {
+      BindTexture(kLiveUnit, GL_TEXTURE_2D, accum_live);
+    }
+    if (shadowed) {
+      std::vector<float> matrices(16 * kMaxProjectors, 0.0f), position_offset(4 * kMaxProjectors, 0.0f);
+      for (const ProjectorPass& pass : *shadowed) {
+        if (pass.retained) continue;
+        const ProjectorGl g = MakeProjectorGl(*pass.projector, options.shadow_map_size);
+        std::copy(g.shadow_clip_from_local.begin(), g.shadow_clip_from_local.end(), matrices.begin() + 16 * pass.layer);
+        for (int k = 0; k < 3; ++k) position_offset[4 * pass.layer + k] = static_cast<float>(pass.projector->position[k]);
+        position_offset[4 * pass.layer + 3] = g.normal_offset;
+      }
+      glUniformMatrix4fv(u["u_shadow_clip_from_local"], kMaxProjectors, GL_FALSE, matrices.data());
+      glUniform4fv(u["u_position_offset"], kMaxProjectors, position_offset.data());
+      glUniformMatrix4fv(u["u_local_from_window"], 1, GL_FALSE, ToGlArray(LocalFromWindow(view)).data());
+      glUniform1i(u["u_gbuffer_normal"], kGbufferNormalUnit);
+      glUniform1i(u["u_shadow"], kShadowUnit);
+      BindTexture(kGbufferNormalUnit, GL_TEXTURE_2D, cache_normal);
+      BindTexture(kShadowUnit, GL_TEXTURE_2D_ARRAY, live_shadows.dynamic_array);
+    }
     glBindVertexArray(empty_vao);
     glDrawArrays(GL_TRIANGLES, 0, 3);
+  }
+
+  // The projector passes of one view into the working accumulation targets, then its resolve
+  // into `target`, within the current scissor box. The working G-buffer must hold the view.
+  void AccumulateAndResolve(const View& view, const std::vector<ProjectorPass>& passes, const std::vector<char>& visible,
+                            bool any_live, bool any_retained, GLuint target) {
+    const bool last_wins = options.display.overlap == OverlapPolicy::kLastWins;
+    glBindFramebuffer(GL_FRAMEBUFFER, fbo_accum);
+    // Only the targets this view's passes write are cleared, and only those the resolve reads.
+    const GLenum none = GL_NONE;
+    const GLenum all_accum[] = {any_live ? GLenum{GL_COLOR_ATTACHMENT0} : none,
+                                any_retained ? GLenum{GL_COLOR_ATTACHMENT1} : none,
+                                any_retained ? GLenum{GL_COLOR_ATTACHMENT2} : none};
+    glDrawBuffers(3, all_accum);
+    ApplyPassState(Pass::kGbuffer);
+    if (any_live || any_retained) glClear(GL_COLOR_BUFFER_BIT);
+    BindProjectorInputs(view, projector, gbuffer_normal, gbuffer_depth);
+    BindTexture(kVideoUnit, GL_TEXTURE_2D_ARRAY, video_array);
+    BindTexture(kShadowUnit, GL_TEXTURE_2D_ARRAY,
+                options.dynamic_objects_cast_shadows ? live_shadows.dynamic_array : live_shadows.static_array);
+    const GLenum live_buffers[] = {GL_COLOR_ATTACHMENT0, GL_NONE};
+    glDrawBuffers(2, live_buffers);
+    ApplyPassState(Pass::kProjector, /*blend=*/!last_wins);
+    for (size_t k = 0; k < passes.size(); ++k) {
+      if (visible[k] && !passes[k].retained) DrawPass(projector.u, passes[k], k, last_wins);
+    }
+    if (any_retained) DrawRetainedPasses(passes, visible);
+    glBindFramebuffer(GL_FRAMEBUFFER, target);
+    Resolve(view, any_live, any_retained);
+  }
+
+  void DrawPass(const Uniforms& u, const ProjectorPass& pass, size_t index, bool last_wins) {
+    const float scale = pass.retained ? static_cast<float>(std::pow(pass.fade, kNewerWins)) : 1.0f;
+    DrawProjectorPass(u, *pass.projector, pass.layer, static_cast<GLint>(36 * index), last_wins && !pass.retained,
+                      pass.fade, scale);
+  }
+
+  // Retained passes into draw buffers 1 and 2 of the bound accumulation framebuffer, whose
+  // projector inputs are bound.
+  void DrawRetainedPasses(const std::vector<ProjectorPass>& passes, const std::vector<char>& visible) {
+    BindTexture(kVideoUnit, GL_TEXTURE_2D_ARRAY, retained_video_array);
+    BindTexture(kShadowUnit, GL_TEXTURE_2D_ARRAY, retained_shadows.static_array);
+    const GLenum retained_buffers[] = {GL_COLOR_ATTACHMENT1, GL_COLOR_ATTACHMENT2};
+    glDrawBuffers(2, retained_buffers);
+    ApplyPassState(Pass::kProjector, /*blend=*/true);
+    for (size_t k = 0; k < passes.size(); ++k) {
+      if (visible[k] && passes[k].retained) DrawPass(projector.u, passes[k], k, false);
+    }
+  }
+
+  // Everything a view's cached G-buffer, mapping and retained targets depend on. Video content is
+  // not in it (the mapping is sampled against the current frames), nor the dynamic models
+  // (drawn exactly on top), nor the retained fade (scaled in the resolve).
+  std::vector<double> CacheSignature(const View& view, const std::vector<ProjectorPass>& passes,
+                                     const std::vector<char>& visible) const {
+    std::vector<double> sig;
+    const Viewport& v = view.viewport;
+    const DisplayOptions& display = options.display;
+    sig.insert(sig.end(), {double(target_width), double(target_height), double(v.x), double(v.y), double(v.width),
+                           double(v.height), double(static_version), double(static_cast<int>(display.overlap)),
+                           display.seam_feather, display.retention_half_life_s, double(display.sky)});
+    sig.insert(sig.end(), view.clear_color.data(), view.clear_color.data() + 3);
+    AppendMatrix(view.view, sig);
+    AppendMatrix(view.projection, sig);
+    for (size_t k = 0; k < passes.size(); ++k) {
+      if (!visible[k]) continue;
+      const ProjectorPass& pass = passes[k];
+      const Projector& p = *pass.projector;
+      sig.insert(sig.end(), {double(pass.retained), double(pass.layer), p.near_m, p.far_m});
+      if (pass.retained) sig.push_back(double(retained[pass.layer].order));
+      AppendMatrix(p.view, sig);
+      AppendMatrix(p.projection, sig);
+      sig.insert(sig.end(), p.distortion.begin(), p.distortion.end());
+      for (const Eigen::Vector3d& c : pass.corners) sig.insert(sig.end(), c.data(), c.data() + 3);
+    }
+    return sig;
+  }
+
+  // Draws a still view's cache: the static G-buffer, the mapping of the live passes (image
+  // load/store, a barrier between projectors) and the retained accumulation.
+  void BuildViewCache(const View& view, const std::vector<ProjectorPass>& passes, const std::vector<char>& visible,
+                      ViewCache& cache) {
+    glBindFramebuffer(GL_FRAMEBUFFER, fbo_cache_gbuffer);
+    ApplyPassState(Pass::kGbuffer);
+    glClearColor(0, 0, 0, 0);
+    glClearDepth(1.0);
+    glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+    DrawGbuffer(view, /*with_static=*/true, /*with_dynamic=*/false);
+    glBindFramebuffer(GL_FRAMEBUFFER, fbo_mapping);
+    ApplyPassState(Pass::kGbuffer);
+    if (cache.any_live) glClear(GL_COLOR_BUFFER_BIT);
+    glBindFramebuffer(GL_FRAMEBUFFER, fbo_cache_accum);
+    const GLenum retained_buffers[] = {GL_NONE, GL_COLOR_ATTACHMENT1, GL_COLOR_ATTACHMENT2};
+    glDrawBuffers(3, retained_buffers);
+    if (cache.any_retained) glClear(GL_COLOR_BUFFER_BIT);
+    const GLenum no_buffers[] = {GL_NONE, GL_NONE};
+    glDrawBuffers(2, no_buffers);
+    if (cache.any_live) {
+      BindProjectorInputs(view, mapping, cache_normal, cache_depth);
+      BindTexture(kShadowUnit, GL_TEXTURE_2D_ARRAY, live_shadows.static_array);
+      glBindImageTexture(kMappingImageUnit, mapping_array, 0, GL_TRUE, 0, GL_READ_WRITE, GL_RGBA32F);
+      glUniform1i(mapping.u["u_mapping"], static_cast<GLint>(kMappingImageUnit));
+      ApplyPassState(Pass::kProjector);
+      const bool last_wins = options.display.overlap == OverlapPolicy::kLastWins;
+      for (size_t k = 0; k < passes.size(); ++k) {
+        if (!visible[k] || passes[k].retained) continue;
+        DrawPass(mapping.u, passes[k], k, last_wins);
+        glMemoryBarrier(GL_SHADER_IMAGE_ACCESS_BARRIER_BIT);
+      }
+      glMemoryBarrier(GL_TEXTURE_FETCH_BARRIER_BIT);
+    }
+    if (cache.any_retained) {
+      BindProjectorInputs(view, projector, cache_normal, cache_depth);
+      DrawRetainedPasses(passes, visible);
+    }
+    cache.built_s = Now();
+  }
+
+  // The lowest static surface over the x-y extent of `box` (chunk boxes), +inf where no chunk is.
+  double FloorUnder(const Bounds& box) const {
+    double z = std::numeric_limits<double>::infinity();
+    for (const MeshChunk& chunk : static_chunks) {
+      const Bounds& c = chunk.bounds;
+      if (c.lo.x() <= box.hi.x() && box.lo.x() <= c.hi.x() && c.lo.y() <= box.hi.y() && box.lo.y() <= c.hi.y()) {
+        z = std::min(z, c.lo.z());
+      }
+    }
+    return z;
+  }
+
+  // The points bounding what `corners` (a model's box) hides from a projector at `centre`: the
+  // corners and where the rays through them reach the lowest static surface under that region
+  // (found by widening until the chunks under the swept region reach no lower; the terrain is a
+  // height field, so a ray below it there has hit something). Rays that do not descend, and all
+  // rays when the region leaves the static model (they may reach the sky dome), are added as
+  // directions instead (their whole length).
+  void AppendShadowRegion(const std::array<Eigen::Vector3d, 8>& corners, const Eigen::Vector3d& centre,
+                          std::vector<Eigen::Vector4d>& points) const {
+    Bounds region;
+    for (const Eigen::Vector3d& q : corners) region.Add(q);
+    double floor_z = FloorUnder(region);
+    auto as_directions = [&] {
+      for (const Eigen::Vector3d& q : corners) points.emplace_back((q - centre).x(), (q - centre).y(), (q - centre).z(), 0);
+    };
+    std::vector<Eigen::Vector4d> ends;
+    for (int widen = 0; widen < 8; ++widen) {
+      if (!std::isfinite(floor_z)) return as_directions();
+      ends.clear();
+      Bounds swept = region;
+      for (const Eigen::Vector3d& q : corners) {
+        const Eigen::Vector3d ray = q - centre;
+        if (q.z() <= floor_z) continue;
+        if (!(ray.z() < -1e-9)) {
+          ends.emplace_back(ray.x(), ray.y(), ray.z(), 0);
+          continue;
+        }
+        const Eigen::Vector3d end = centre + ray * ((floor_z - centre.z()) / ray.z());
+        ends.push_back(end.homogeneous());
+        swept.Add(end);
+      }
+      const double lower = FloorUnder(swept);
+      if (lower >= floor_z) {
+        if (options.display.sky && (swept.lo.x() < static_bounds.lo.x() || swept.hi.x() > static_bounds.hi.x() ||
+                                    swept.lo.y() < static_bounds.lo.y() || swept.hi.y() > static_bounds.hi.y())) {
+          return as_directions();
+        }
+        points.insert(points.end(), ends.begin(), ends.end());
+        return;
+      }
+      floor_z = lower;
+    }
+    as_directions();
+  }
+
+  // Screen rectangles of a view that dynamic models may change: `models`, each model's own box
+  // (drawn exactly), and `shadows`, for each live projector that may see a model the region the
+  // model hides from it (AppendShadowRegion; the cached entries are shadow-tested there).
+  struct DynamicRegions {
+    std::vector<Viewport> models, shadows;
+  };
+  DynamicRegions DynamicRects(const View& view, const std::vector<ProjectorPass>& passes,
+                              const std::vector<char>& visible) const {
+    DynamicRegions regions;
+    const Viewport& v = view.viewport;
+    const Eigen::Matrix4d clip_from_local = view.projection * view.view;
+    for (const Bounds& box : model_bounds) {
+      const std::array<Eigen::Vector3d, 8> corners = box.Corners();
+      std::vector<Eigen::Vector4d> points;
+      for (const Eigen::Vector3d& c : corners) points.push_back(c.homogeneous());
+      if (const std::optional<Viewport> rect = ScreenRect(points, clip_from_local, v)) regions.models.push_back(*rect);
+      if (!options.dynamic_objects_cast_shadows) continue;
+      const size_t own = points.size();
+      for (size_t k = 0; k < passes.size(); ++k) {
+        const ProjectorPass& pass = passes[k];
+        if (pass.retained || !visible[k]) continue;
+        const Projector& p = *pass.projector;
+        if (!VolumeMayBeVisible(corners, p.projection * p.view)) continue;
+        AppendShadowRegion(corners, p.position, points);
+      }
+      if (points.size() == own) continue;
+      if (const std::optional<Viewport> rect = ScreenRect(points, clip_from_local, v)) regions.shadows.push_back(*rect);
+    }
+    MergeOverlapping(regions.models);
+    MergeOverlapping(regions.shadows);
+    return regions;
+  }
+
+  // Merges overlapping rectangles until none overlap (each pixel drawn once).
+  static void MergeOverlapping(std::vector<Viewport>& rects) {
+    for (bool merged = true; merged;) {
+      merged = false;
+      for (size_t a = 0; a < rects.size() && !merged; ++a) {
+        for (size_t b = a + 1; b < rects.size() && !merged; ++b) {
+          if (!Overlap(rects[a], rects[b])) continue;
+          rects[a] = Union(rects[a], rects[b]);
+          rects.erase(rects.begin() + static_cast<std::ptrdiff_t>(b));
+          merged = true;
+        }
+      }
+    }
+  }
+
+  // The working G-buffer of a view, then its projector passes and resolve: the full frame.
+  void DrawViewExact(const View& view, const std::vector<ProjectorPass>& passes, const std::vector<char>& visible,
+                     bool any_live, bool any_retained, GLuint target) {
+    glBindFramebuffer(GL_FRAMEBUFFER, fbo_gbuffer);
+    ApplyPassState(Pass::kGbuffer);
+    glClearColor(0, 0, 0, 0);
+    glClearDepth(1.0);
+    glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+    DrawGbuffer(view, /*with_static=*/true, /*with_dynamic=*/true);
+    AccumulateAndResolve(view, passes, visible, any_live, any_retained, target);
+    ++stats.views_uncached;
+  }
+
+  // A still view: its cache resolved against the current video, then the rectangles dynamic
+  // models touch drawn exactly over it. The cache is rebuilt when its signature changed and the
+  // view's inputs were the same in the previous frame (or there was none); while they change from
+  // frame to frame (a flying browse view, a turning camera) the view is drawn in full instead,
+  // which costs less than a build that the next frame would throw away.
+  void DrawViewCached(size_t slot, const std::vector<View>& views, const std::vector<ProjectorPass>& passes,
+                      const std::vector<char>& visible, bool any_live, bool any_retained, GLuint target) {
+    const View& view = views[slot];
+    if (view_caches.size() < views.size()) view_caches.resize(views.size());
+    ViewCache& cache = view_caches[slot];
+    std::vector<double> signature = CacheSignature(view, passes, visible);
+    const bool still = cache.last_signature.empty() || cache.last_signature == signature;
+    cache.last_signature = signature;
+    if ((!cache.valid || cache.signature != signature) && !still) {
+      cache.valid = false;
+      DrawViewExact(view, passes, visible, any_live, any_retained, target);
+      return;
+    }
+    if (!cache.valid || cache.signature != signature) {
+      // The cache textures are shared: another slot's cache under this viewport is lost.
+      for (size_t k = 0; k < view_caches.size(); ++k) {
+        if (k != slot && Overlap(view_caches[k].viewport, view.viewport)) view_caches[k].valid = false;
+      }
+      cache.valid = true;
+      cache.viewport = view.viewport;
+      cache.signature = std::move(signature);
+      cache.any_live = any_live;
+      cache.any_retained = any_retained;
+      BuildViewCache(view, passes, visible, cache);
+      ++stats.view_cache_builds;
+    } else {
+      ++stats.view_cache_hits;
+    }
+    glBindFramebuffer(GL_FRAMEBUFFER, target);
+    Resolve(view, cache.any_live, cache.any_retained, &cache);
+    DynamicRegions regions = DynamicRects(view, passes, visible);
+    if (cache.any_live) {
+      for (const Viewport& r : regions.shadows) {
+        glScissor(r.x, r.y, r.width, r.height);
+        Resolve(view, cache.any_live, cache.any_retained, &cache, &passes);
+        ++stats.view_cache_patches;
+      }
+    }
+    cache.patches = std::move(regions.models);
+    cache.last_frame = stats.frames + 1;
+
+    for (const Viewport& r : cache.patches) {
+      glScissor(r.x, r.y, r.width, r.height);
+      for (const auto& [from, to] : {std::pair{cache_color, gbuffer_color}, std::pair{cache_normal, gbuffer_normal},
+                                     std::pair{cache_depth, gbuffer_depth}}) {
+        glCopyImageSubData(from, GL_TEXTURE_2D, 0, r.x, r.y, 0, to, GL_TEXTURE_2D, 0, r.x, r.y, 0, r.width, r.height, 1);
+      }
+      glBindFramebuffer(GL_FRAMEBUFFER, fbo_gbuffer);
+      DrawGbuffer(view, /*with_static=*/false, /*with_dynamic=*/true);
+      AccumulateAndResolve(view, passes, visible, any_live, any_retained, target);
+      ++stats.view_cache_patches;
+    }
+    const Viewport& v = view.viewport;
+    glScissor(v.x, v.y, v.width, v.height);
   }
 };
 
@@ -1085,29 +1570,56 @@ absl::StatusOr<std::unique_ptr<Renderer>> Renderer::Create(const RendererOptions
   };
   for (const ProgramSpec& spec : {ProgramSpec{&impl->gbuffer_program, "shaders/gbuffer.vert.glsl", "shaders/gbuffer.frag.glsl"},
                                   ProgramSpec{&impl->shadow_program, "shaders/shadow.vert.glsl", "shaders/shadow.frag.glsl"},
-                                  ProgramSpec{&impl->line_program, "shaders/line.vert.glsl", "shaders/line.frag.glsl"},
-                                  ProgramSpec{&impl->projector_program, "shaders/projector.vert.glsl",
-                                              "shaders/projector.frag.glsl"}}) {
+                                  ProgramSpec{&impl->line_program, "shaders/line.vert.glsl", "shaders/line.frag.glsl"}}) {
     absl::StatusOr<GLuint> program = internal::BuildEmbeddedProgram(spec.vertex, spec.fragment);
     if (!program.ok()) return program.status();
     *spec.program = *program;
   }
   impl->gbuffer_u = Uniforms(impl->gbuffer_program, {"u_clip_from_local", "u_sun_direction", "u_ambient", "u_diffuse",
                                                      "u_sky_color"});
-  impl->projector_u = Uniforms(
-      impl->projector_program,
-      {"u_gbuffer_normal", "u_gbuffer_depth", "u_view_clip_from_local", "u_local_from_window",
-       "u_clip_from_local", "u_shadow_clip_from_local", "u_shadow_widen",
-       "u_projector_position", "u_pinhole", "u_k1_k2_p1_p2", "u_k3", "u_distorted", "u_layer", "u_normal_offset",
-       "u_feather", "u_best_view", "u_last_wins", "u_fade", "u_weight_scale", "u_video", "u_shadow"});
-  for (int variant = 0; variant < 4; ++variant) {
-    const std::string defines = std::string(variant & 1 ? "#define LIVE\n" : "") + (variant & 2 ? "#define RETAINED\n" : "");
-    absl::StatusOr<GLuint> program =
-        internal::BuildEmbeddedProgram("shaders/resolve.vert.glsl", "shaders/resolve.frag.glsl", defines);
+  // The view cache needs image load/store (4.2) and glCopyImageSubData (4.3).
+  impl->cache_supported = major * 10 + minor >= 43;
+  const std::string entries = "#define ENTRIES " + std::to_string(options.view_cache_entries) + "\n";
+  auto build = [](Program& out, const char* vertex, const char* fragment, const std::string& defines,
+                  std::initializer_list<const char*> names) -> absl::Status {
+    absl::StatusOr<GLuint> program = internal::BuildEmbeddedProgram(vertex, fragment, defines);
     if (!program.ok()) return program.status();
-    impl->resolve_programs[variant] = *program;
-    impl->resolve_u[variant] = Uniforms(*program, {"u_gbuffer_color", "u_gbuffer_depth", "u_live", "u_retained",
-                                                   "u_fade", "u_clear_color", "u_tint_by_age"});
+    out.id = *program;
+    out.u = Uniforms(out.id, names);
+    return absl::OkStatus();
+  };
+  const std::initializer_list<const char*> projector_names = {
+      "u_gbuffer_normal", "u_gbuffer_depth", "u_view_clip_from_local", "u_local_from_window",
+      "u_clip_from_local", "u_shadow_clip_from_local", "u_shadow_widen",
+      "u_projector_position", "u_pinhole", "u_k1_k2_p1_p2", "u_k3", "u_distorted", "u_layer", "u_normal_offset",
+      "u_feather", "u_best_view", "u_last_wins", "u_fade", "u_weight_scale", "u_video", "u_shadow", "u_mapping"};
+  if (absl::Status s = build(impl->projector, "shaders/projector.vert.glsl", "shaders/projector.frag.glsl", "",
+                             projector_names);
+      !s.ok()) {
+    return s;
+  }
+  if (impl->cache_supported) {
+    const std::string defines = "#extension GL_ARB_shader_image_load_store : require\n#define MAPPING\n" + entries;
+    if (absl::Status s = build(impl->mapping, "shaders/projector.vert.glsl", "shaders/projector.frag.glsl", defines,
+                               projector_names);
+        !s.ok()) {
+      return s;
+    }
+  }
+  for (int variant = 0; variant < (impl->cache_supported ? 16 : 4); ++variant) {
+    if ((variant & 8) && (variant & 5) != 5) continue;
+    const std::string defines = std::string(variant & 1 ? "#define LIVE\n" : "") +
+                                (variant & 2 ? "#define RETAINED\n" : "") + (variant & 4 ? "#define CACHED\n" : "") +
+                                (variant & 8 ? "#define SHADOWED\n" : "") + entries + "#define MAX_PROJECTORS " +
+                                std::to_string(kMaxProjectors) + "\n";
+    if (absl::Status s = build(impl->resolve[variant], "shaders/resolve.vert.glsl", "shaders/resolve.frag.glsl", defines,
+                               {"u_gbuffer_color", "u_gbuffer_depth", "u_live", "u_retained", "u_fade", "u_clear_color",
+                                "u_tint_by_age", "u_fade_scale", "u_mapping", "u_video", "u_last_wins",
+                                "u_gbuffer_normal", "u_local_from_window", "u_shadow", "u_shadow_clip_from_local",
+                                "u_position_offset"});
+        !s.ok()) {
+      return s;
+    }
   }
   impl->shadow_clip_from_local = glGetUniformLocation(impl->shadow_program, "u_clip_from_local");
   impl->line_clip_from_local = glGetUniformLocation(impl->line_program, "u_clip_from_local");
@@ -1130,7 +1642,8 @@ absl::StatusOr<std::unique_ptr<Renderer>> Renderer::Create(const RendererOptions
   glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
   glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
   for (GLuint* fbo : {&impl->fbo_video_src, &impl->fbo_video_dst, &impl->fbo_shadow_src, &impl->fbo_shadow_dst,
-                      &impl->fbo_gbuffer, &impl->fbo_accum}) {
+                      &impl->fbo_gbuffer, &impl->fbo_accum, &impl->fbo_cache_gbuffer, &impl->fbo_cache_accum,
+                      &impl->fbo_mapping}) {
     glGenFramebuffers(1, fbo);
   }
   {
@@ -1249,6 +1762,16 @@ absl::Status Renderer::SetProjectors(const std::vector<Projector>& projectors) {
       p.image_rgba = {};
     } else {
       d.stale.erase(p.camera_id);
+      if (old != nullptr && MatricesFinite(*old) &&
+          ReprojectionShiftPx(*old, p, d.options.frustum_depth_m, d.options.video_layer_width,
+                              d.options.video_layer_height) < d.options.still_pose_tolerance_px) {
+        // Jitter of a still camera: keep the pose its shadow map and the view caches were made with.
+        p.view = old->view;
+        p.projection = old->projection;
+        p.position = old->position;
+        p.near_m = old->near_m;
+        p.far_m = old->far_m;
+      }
       if (slot.has_image && old != nullptr && slot.anchor_view) {
         const Eigen::Matrix3d r_new = p.view.topLeftCorner<3, 3>(), r_anchor = slot.anchor_view->topLeftCorner<3, 3>();
         const Eigen::Vector3d c_new = -r_new.transpose() * p.view.topRightCorner<3, 1>();
@@ -1289,6 +1812,7 @@ absl::Status Renderer::SetDynamicModels(const std::vector<DynamicModel>& models)
   std::vector<Vertex> vertices;
   vertices.reserve(models.size() * 30);
   Bounds bounds;
+  std::vector<Bounds> model_bounds(models.size());
   for (size_t k = 0; k < models.size(); ++k) {
     const DynamicModel& m = models[k];
     if (!m.base.allFinite() || !std::isfinite(m.heading_rad) || !m.size.allFinite() || !m.color.allFinite() ||
@@ -1297,6 +1821,10 @@ absl::Status Renderer::SetDynamicModels(const std::vector<DynamicModel>& models)
                                         " needs finite values and a positive size");
     }
     AppendModelVertices(m, vertices);
+    // A box around any heading: half the diagonal of the footprint is below (length + width) / 2.
+    const double reach = 0.5 * (m.size.x() + m.size.y());
+    model_bounds[k].Add(m.base - Eigen::Vector3d(reach, reach, 0));
+    model_bounds[k].Add(m.base + Eigen::Vector3d(reach, reach, m.size.z()));
     bounds.Add(m.base - Eigen::Vector3d(m.size.x() + m.size.y(), m.size.x() + m.size.y(), 0));
     bounds.Add(m.base + Eigen::Vector3d(m.size.x() + m.size.y(), m.size.x() + m.size.y(), m.size.z()));
   }
@@ -1308,6 +1836,7 @@ absl::Status Renderer::SetDynamicModels(const std::vector<DynamicModel>& models)
   d.dynamic_mesh.Upload(vertices, GL_DYNAMIC_DRAW);
   d.dynamic_vertices = std::move(vertices);
   d.dynamic_bounds = bounds;
+  d.model_bounds = std::move(model_bounds);
   ++d.dynamic_version;
   return CheckGl("SetDynamicObjects");
 }
@@ -1354,13 +1883,6 @@ absl::Status Renderer::Render(const std::vector<View>& views, int framebuffer_wi
 
   // Frustum volumes of every active projector (live, then retained), 36 vertices each.
   const Bounds scene = d.SceneBounds();
-  struct ProjectorPass {
-    const Projector* projector;
-    int layer;
-    bool retained;
-    float fade;
-    std::array<Eigen::Vector3d, 8> corners;
-  };
   std::vector<ProjectorPass> passes;
   std::vector<LineVertex> volume_vertices;
   for (size_t i = 0; i < d.projectors.size(); ++i) {
@@ -1378,22 +1900,13 @@ absl::Status Renderer::Render(const std::vector<View>& views, int framebuffer_wi
   }
   d.volumes.Upload(volume_vertices, GL_STREAM_DRAW);
 
-  const bool last_wins = d.options.display.overlap == OverlapPolicy::kLastWins;
-  for (const View& view : views) {
+  if (d.view_caches.size() > views.size()) d.view_caches.resize(views.size());
+  for (size_t slot = 0; slot < views.size(); ++slot) {
+    const View& view = views[slot];
     const Viewport& v = view.viewport;
     const Eigen::Matrix4d clip_from_local = view.projection * view.view;
     glViewport(v.x, v.y, v.width, v.height);
     glScissor(v.x, v.y, v.width, v.height);
-
-    glBindFramebuffer(GL_FRAMEBUFFER, d.fbo_gbuffer);
-    ApplyPassState(Pass::kGbuffer);
-    glClearColor(0, 0, 0, 0);
-    glClearDepth(1.0);
-    glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
-    d.DrawGbuffer(view);
-
-    glBindFramebuffer(GL_FRAMEBUFFER, d.fbo_accum);
-    // Only the targets this view's passes write are cleared, and only those the resolve reads.
     bool any_live = false, any_retained = false;
     std::vector<char> visible(passes.size());
     for (size_t k = 0; k < passes.size(); ++k) {
@@ -1401,39 +1914,15 @@ absl::Status Renderer::Render(const std::vector<View>& views, int framebuffer_wi
       if (!visible[k]) ++d.stats.projectors_culled;
       (passes[k].retained ? any_retained : any_live) |= static_cast<bool>(visible[k]);
     }
-    const GLenum none = GL_NONE;
-    const GLenum all_accum[] = {any_live ? GLenum{GL_COLOR_ATTACHMENT0} : none,
-                                any_retained ? GLenum{GL_COLOR_ATTACHMENT1} : none,
-                                any_retained ? GLenum{GL_COLOR_ATTACHMENT2} : none};
-    glDrawBuffers(3, all_accum);
-    ApplyPassState(Pass::kGbuffer);
-    if (any_live || any_retained) glClear(GL_COLOR_BUFFER_BIT);
-    d.BindProjectorInputs(view);
-    Impl::BindTexture(kVideoUnit, GL_TEXTURE_2D_ARRAY, d.video_array);
-    Impl::BindTexture(kShadowUnit, GL_TEXTURE_2D_ARRAY,
-                      d.options.dynamic_objects_cast_shadows ? d.live_shadows.dynamic_array : d.live_shadows.static_array);
-    const GLenum live_buffers[] = {GL_COLOR_ATTACHMENT0, GL_NONE};
-    glDrawBuffers(2, live_buffers);
-    ApplyPassState(Pass::kProjector, /*blend=*/!last_wins);
-    bool retained_bound = false;
-    for (size_t k = 0; k < passes.size(); ++k) {
-      const ProjectorPass& pass = passes[k];
-      if (!visible[k]) continue;
-      if (pass.retained && !retained_bound) {
-        Impl::BindTexture(kVideoUnit, GL_TEXTURE_2D_ARRAY, d.retained_video_array);
-        Impl::BindTexture(kShadowUnit, GL_TEXTURE_2D_ARRAY, d.retained_shadows.static_array);
-        const GLenum retained_buffers[] = {GL_COLOR_ATTACHMENT1, GL_COLOR_ATTACHMENT2};
-        glDrawBuffers(2, retained_buffers);
-        ApplyPassState(Pass::kProjector, /*blend=*/true);
-        retained_bound = true;
-      }
-      const float scale = pass.retained ? static_cast<float>(std::pow(pass.fade, kNewerWins)) : 1.0f;
-      d.DrawProjectorPass(*pass.projector, pass.layer, static_cast<GLint>(36 * k), last_wins && !pass.retained,
-                          pass.fade, scale);
+    // Views that share pixels with another view of this call cannot keep a cache (shared targets).
+    bool cached = d.CacheOn();
+    for (size_t k = 0; k < views.size() && cached; ++k) cached = k == slot || !Overlap(views[k].viewport, v);
+    if (cached) {
+      d.DrawViewCached(slot, views, passes, visible, any_live, any_retained, target);
+    } else {
+      if (slot < d.view_caches.size()) d.view_caches[slot] = ViewCache();
+      d.DrawViewExact(view, passes, visible, any_live, any_retained, target);
     }
-
-    glBindFramebuffer(GL_FRAMEBUFFER, target);
-    d.Resolve(view, any_live, any_retained);
     d.DrawLines(view);
   }
   glBindVertexArray(0);
@@ -1452,11 +1941,27 @@ absl::StatusOr<std::vector<float>> Renderer::ReadLinearDepth(const View& view) c
   FramebufferGuard guard;
   std::vector<float> window_depth(static_cast<size_t>(v.width) * v.height);
   std::vector<uint8_t> color(static_cast<size_t>(v.width) * v.height * 4);
-  glBindFramebuffer(GL_READ_FRAMEBUFFER, d.fbo_gbuffer);
+  // A view drawn from its cache in the last frame: the cached G-buffer, and the working one in the
+  // rectangles drawn exactly over it.
+  std::vector<std::pair<GLuint, Viewport>> sources = {{d.fbo_gbuffer, v}};
+  for (const ViewCache& cache : d.view_caches) {
+    if (!cache.valid || cache.last_frame != d.stats.frames || cache.viewport.x != v.x || cache.viewport.y != v.y ||
+        cache.viewport.width != v.width || cache.viewport.height != v.height) {
+      continue;
+    }
+    sources = {{d.fbo_cache_gbuffer, v}};
+    for (const Viewport& r : cache.patches) sources.emplace_back(d.fbo_gbuffer, r);
+  }
   glPixelStorei(GL_PACK_ALIGNMENT, 1);
-  glReadPixels(v.x, v.y, v.width, v.height, GL_DEPTH_COMPONENT, GL_FLOAT, window_depth.data());
-  glReadBuffer(GL_COLOR_ATTACHMENT0);
-  glReadPixels(v.x, v.y, v.width, v.height, GL_RGBA, GL_UNSIGNED_BYTE, color.data());
+  glPixelStorei(GL_PACK_ROW_LENGTH, v.width);
+  for (const auto& [fbo, r] : sources) {
+    const size_t offset = static_cast<size_t>(r.y - v.y) * v.width + (r.x - v.x);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, fbo);
+    glReadPixels(r.x, r.y, r.width, r.height, GL_DEPTH_COMPONENT, GL_FLOAT, window_depth.data() + offset);
+    glReadBuffer(GL_COLOR_ATTACHMENT0);
+    glReadPixels(r.x, r.y, r.width, r.height, GL_RGBA, GL_UNSIGNED_BYTE, color.data() + 4 * offset);
+  }
+  glPixelStorei(GL_PACK_ROW_LENGTH, 0);
   if (absl::Status s = CheckGl("ReadLinearDepth"); !s.ok()) return s;
   const Eigen::Matrix4d eye_from_clip = view.projection.inverse();
   std::vector<float> depth(window_depth.size());

@@ -33,6 +33,11 @@
 // policy, retention half-life, age tint, sky: ImGui toggles), SetClock (replay time), StaleCameras()
 // (cameras whose last pose had NaNs), ReadLinearDepth + WriteDepthExr (--depth F.exr).
 //
+// Still views (RendererOptions::view_cache): a view whose inputs other than the video content and
+// the dynamic models did not change since its last frame reuses its G-buffer and a per-pixel
+// mapping of the projectors reaching each pixel; only the resolve and the rectangles around
+// dynamic models are drawn again.
+//
 // Needs a current GL 3.3+ core context (gl_context.h) for its whole life: create it after the
 // context is current, call it on that thread, destroy it before the context.
 #include <array>
@@ -169,10 +174,34 @@ struct RendererOptions {
   // snapshot leaves a snapshot of its previous pose and frame behind.
   double retention_turn_deg = 10;
   double retention_move_m = 1.0;
+  // Pose jitter (issue 7 performance): a camera whose new pose moves the image corners and centre
+  // at frustum_depth_m in front of it by less than this many pixels of the video layer (against
+  // the pose kept so far) keeps its kept pose, so fused poses (EKF) that wobble by tiny amounts
+  // leave its shadow map and the view caches alone. 0: every change of the matrices counts.
+  double still_pose_tolerance_px = 0.25;
   // Sky dome (elevation -10 to 90 degrees) centred on the bottom centre of the static model's
   // bounding box; radius in metres, 0: 1.2 x the box's half diagonal (at least 100 m). Projectors
   // reach it only within their far plane. It is drawn in the view's clear colour.
   double sky_radius_m = 0;
+  // View cache (issue 7 performance; docs/BENCHMARKS.md "## Rendering"): for a view whose matrices,
+  // viewport and clear colour, the static model, the active projectors' poses, distortion and
+  // layers, the display options and the retained snapshots are as in its last frame, the G-buffer
+  // of the static model and a per-pixel mapping of the view_cache_entries best live projector
+  // entries (video u, v, layer, weight) are kept; such a frame is one resolve pass that samples the
+  // current video through the mapping. In the screen rectangle of the region a dynamic model hides
+  // from the projectors that may see it, each cached entry is also tested against its projector's
+  // shadow map with the models; in the model's own screen box the exact passes are drawn. Where
+  // more than view_cache_entries cameras overlap, only the best ones are blended (and where a model
+  // hides one of them, the next one is not brought in). A view whose inputs change from one frame
+  // to the next (flying, a turning camera) is drawn in full; its cache is built in the first frame
+  // they stay as in the frame before. Needs OpenGL 4.3 (image load/store, copy image); on an older
+  // context, or for views whose viewports overlap another view of the same Render, every frame is
+  // drawn in full.
+  bool view_cache = true;
+  // Live projector entries kept per pixel (1..kMaxViewCacheEntries): each costs 16 bytes per
+  // framebuffer pixel and a texel fetch per covered pixel in every cached frame; see
+  // docs/BENCHMARKS.md for the difference to the exact blend where more cameras overlap.
+  int view_cache_entries = 4;
   DisplayOptions display;
 
   // Empty when usable; otherwise names the first bad field.
@@ -190,7 +219,18 @@ struct RenderStats {
   uint64_t retained_snapshots = 0;   // snapshots taken
   uint64_t retained_shadow_renders = 0;
   uint64_t chunks_culled = 0;        // static-model chunks skipped (G-buffer and shadow passes): off screen
+  uint64_t view_cache_builds = 0;    // views whose cache was (re)built: G-buffer and mapping drawn
+  uint64_t view_cache_hits = 0;      // views drawn from an unchanged cache (resolve only)
+  // Screen rectangles around dynamic models drawn over a cached view: a model's own box drawn
+  // exactly, or the region it may hide from projectors, where cached entries are shadow-tested.
+  uint64_t view_cache_patches = 0;
+  // Views drawn in full: cache off or unsupported, overlapping views, or inputs that changed since
+  // the view's previous frame (the cache is built on the first frame they stay the same).
+  uint64_t views_uncached = 0;
 };
+
+// Most live projector entries the view cache keeps per pixel (RendererOptions::view_cache_entries).
+inline constexpr int kMaxViewCacheEntries = 8;
 
 class Renderer {
  public:

@@ -3,6 +3,7 @@
 #include "viewer_client/render/renderer.h"
 
 #include <chrono>
+#include <functional>
 #include <cstdio>
 #include <cstdlib>
 #include <limits>
@@ -604,6 +605,8 @@ TEST(Campus, RendersQuadLayoutWithThreeProjectors) {
 // ---------------------------------------------------------------------------------------------
 // Issue 7: analytic truth on the `minimal` scenario, hard cases, retention, overlap, models.
 
+std::vector<uint8_t> SolidImage(int width, int height, Eigen::Vector3i rgb);
+
 // A smooth image (red grows to the right, green downwards) so per-pixel comparisons tolerate
 // sub-pixel sampling differences.
 Eigen::Vector3i GradientColor(double u, double v, int width, int height) {
@@ -728,8 +731,10 @@ TEST_P(MinimalTruthTest, Snapshot_MatchesRayCastProjection) {
   absl::StatusOr<std::unique_ptr<Renderer>> renderer = Renderer::Create(options);
   ASSERT_TRUE(renderer.ok()) << renderer.status();
   ASSERT_TRUE((*renderer)->SetStaticMesh(mesh).ok());
-  const std::vector<uint8_t> image = GradientImage(cam.intrinsics.width, cam.intrinsics.height);
-  Projector p = MakeProjector(projector, image, 1);
+  // The first frame (which builds the view cache) shows other content; the second, drawn from the
+  // cache with new video, is the one checked: the mapping is reused, the colours are not.
+  const std::vector<uint8_t> first_image = SolidImage(cam.intrinsics.width, cam.intrinsics.height, {0, 0, 255});
+  Projector p = MakeProjector(projector, first_image, 1);
   p.distortion = distortion;
   ASSERT_TRUE((*renderer)->SetProjectors({p}).ok());
 
@@ -738,6 +743,13 @@ TEST_P(MinimalTruthTest, Snapshot_MatchesRayCastProjection) {
   view.draw_frustums = false;
   (*context)->BindFramebuffer();
   ASSERT_TRUE((*renderer)->Render({view}, kW, kH).ok());
+  const std::vector<uint8_t> image = GradientImage(cam.intrinsics.width, cam.intrinsics.height);
+  p.image_rgba = image;
+  p.image_serial = 2;
+  ASSERT_TRUE((*renderer)->SetProjectors({p}).ok());
+  ASSERT_TRUE((*renderer)->Render({view}, kW, kH).ok());
+  EXPECT_EQ((*renderer)->stats().view_cache_builds, 1u);
+  EXPECT_EQ((*renderer)->stats().view_cache_hits, 1u);
   const std::vector<uint8_t> rgba = *(*context)->ReadPixels();
   WritePng(distorted ? "/tmp/render_minimal_distorted.png" : "/tmp/render_minimal.png", rgba, kW, kH);
 
@@ -1023,6 +1035,258 @@ TEST_F(SceneTest, Depth_IsLinearMetresAndWritesExr) {
   EXPECT_EQ(magic[1], 0x2f);
   EXPECT_FALSE(WriteDepthExr("/nonexistent-dir/x.exr", *depth, kWidth, kHeight).ok());
   EXPECT_FALSE(WriteDepthExr(path, *depth, kWidth + 1, kHeight).ok());
+}
+
+// ---------------------------------------------------------------------------------------------
+// View cache (issue 7 performance): still views reuse their G-buffer and projector mapping.
+
+// Per-channel absolute differences of two RGBA pictures.
+struct PictureDifference {
+  double mean = 0;
+  int max = 0;
+  double share_over_2 = 0;  // share of pixels with some channel more than 2 levels apart
+};
+
+PictureDifference Compare(const std::vector<uint8_t>& a, const std::vector<uint8_t>& b) {
+  PictureDifference d;
+  EXPECT_EQ(a.size(), b.size());
+  const size_t pixels = std::min(a.size(), b.size()) / 4;
+  size_t over = 0;
+  for (size_t k = 0; k < pixels; ++k) {
+    int worst = 0;
+    for (int ch = 0; ch < 3; ++ch) {
+      const int diff = std::abs(int(a[4 * k + ch]) - int(b[4 * k + ch]));
+      d.mean += diff;
+      worst = std::max(worst, diff);
+    }
+    d.max = std::max(d.max, worst);
+    over += worst > 2;
+  }
+  d.mean /= std::max<size_t>(1, 3 * pixels);
+  d.share_over_2 = static_cast<double>(over) / std::max<size_t>(1, pixels);
+  return d;
+}
+
+// The same inputs into a cached and an uncached renderer, frame after frame.
+class ViewCacheTest : public SceneTest {
+ protected:
+  void SetUp() override {
+    SceneTest::SetUp();
+    RendererOptions options;
+    options.view_cache = false;
+    absl::StatusOr<std::unique_ptr<Renderer>> exact = Renderer::Create(options);
+    ASSERT_TRUE(exact.ok()) << exact.status();
+    exact_ = std::move(*exact);
+    ASSERT_TRUE(exact_->SetStaticMesh(mesh_).ok());
+    ASSERT_TRUE(exact_->SetProjectors({MakeProjector(projector_, image_, 1)}).ok());
+  }
+  void TearDown() override {
+    exact_.reset();
+    SceneTest::TearDown();
+  }
+
+  // Applies `step` to both renderers, renders both, and checks the cached picture against the
+  // exact one. Returns the cached picture.
+  std::vector<uint8_t> Step(const std::function<absl::Status(Renderer&)>& step, const std::string& what) {
+    EXPECT_TRUE(step(*renderer_).ok()) << what;
+    EXPECT_TRUE(step(*exact_).ok()) << what;
+    const std::vector<uint8_t> cached = RenderViewer(true);
+    std::swap(renderer_, exact_);
+    const std::vector<uint8_t> exact = RenderViewer(true);
+    std::swap(renderer_, exact_);
+    const PictureDifference d = Compare(cached, exact);
+    EXPECT_LE(d.max, 3) << what << ": mean " << d.mean;
+    EXPECT_LE(d.share_over_2, 0.001) << what;
+    return cached;
+  }
+
+  std::unique_ptr<Renderer> exact_;
+};
+
+TEST_F(ViewCacheTest, CachedFramesEqualExactOnesAcrossPoliciesLensesRetentionAndMovers) {
+  const Camera near_cam{PinholeIntrinsics::FromFov(640, 480, 70), LookAt({-12, 10, 6}, {-10, 6, 0})};
+  const std::vector<uint8_t> gradient = GradientImage(640, 480), green = SolidImage(640, 480, {20, 200, 90});
+  Projector a = MakeProjector(near_cam, gradient, 1), b = MakeProjector(projector_, image_, 1);
+  a.camera_id = "near";
+  auto set = [](std::vector<Projector> ps) { return [ps](Renderer& r) { return r.SetProjectors(ps); }; };
+  // New content in both cameras (as live video does): swaps their images.
+  uint64_t serial = 1;
+  auto new_video = [&] {
+    ++serial;
+    a.image_serial = b.image_serial = serial;
+    a.image_rgba = serial % 2 ? std::span<const uint8_t>(gradient) : std::span<const uint8_t>(image_);
+    b.image_rgba = serial % 2 ? std::span<const uint8_t>(image_) : std::span<const uint8_t>(green);
+    Step(set({a, b}), "new video " + std::to_string(serial));
+  };
+  auto clock = [](double t) {
+    return [t](Renderer& r) {
+      r.SetClock(t);
+      return absl::OkStatus();
+    };
+  };
+  auto display = [](OverlapPolicy overlap, bool tint) {
+    return [=](Renderer& r) {
+      DisplayOptions d;
+      d.overlap = overlap;
+      d.tint_by_age = tint;
+      return r.SetDisplayOptions(d);
+    };
+  };
+  Step(clock(10), "start");
+  Step(set({a, b}), "two projectors, blend");  // changed: drawn in full
+  new_video();                                  // still: the cache is built
+  const RenderStats built = renderer_->stats();
+  new_video();
+  // A mover casting a shadow over the projected ground: the cache is reused, patched around it.
+  for (double x : {-9.0, -8.0, -7.0}) {
+    Step([x](Renderer& r) { return r.SetDynamicObjects({DynamicBox{{x, 6, 0}, 0.3, {1, 1, 3}, {0.2f, 0.8f, 0.2f}}}); },
+         "box moving");
+  }
+  EXPECT_EQ(renderer_->stats().view_cache_builds, built.view_cache_builds) << "nothing but video and movers changed";
+  EXPECT_EQ(renderer_->stats().view_cache_hits, built.view_cache_hits + 4);
+  EXPECT_GT(renderer_->stats().view_cache_patches, built.view_cache_patches);
+  for (OverlapPolicy policy : {OverlapPolicy::kBestView, OverlapPolicy::kLastWins, OverlapPolicy::kBlendBestView}) {
+    Step(display(policy, false), "policy " + std::to_string(static_cast<int>(policy)));
+    new_video();
+  }
+  a.distortion = {-0.18, 0.03, 0.002, -0.001, 0.0};
+  Step(set({a, b}), "distorted lens");
+  new_video();
+  // Retention: b turns away, leaving a snapshot; then time passes (the fade scales in the resolve).
+  Camera turned = projector_;
+  turned.world_from_camera = LookAt(kProjectorEye, {-18, -30, 0});
+  b = MakeProjector(turned, image_, ++serial);
+  Step(set({a, b}), "turned away");
+  EXPECT_EQ(renderer_->stats().retained_snapshots, 1u);
+  new_video();
+  const uint64_t builds = renderer_->stats().view_cache_builds;
+  Step(clock(40), "half a half-life later");
+  Step(clock(70), "a half-life later");
+  Step(display(OverlapPolicy::kBlendBestView, true), "age tint");
+  EXPECT_EQ(renderer_->stats().view_cache_builds, builds) << "fading and tint reuse the cache";
+  Step([](Renderer& r) { return r.SetDynamicObjects({}); }, "movers gone");
+}
+
+TEST_F(SceneTest, ViewCache_RebuildsExactlyWhenItsInputsChange) {
+  RenderStats last;
+  // A change: that frame is drawn in full, the next (inputs as before) builds the cache; no
+  // change: a hit.
+  auto expect = [&](bool changed, const std::string& what) {
+    RenderViewer(true);
+    RenderStats s = renderer_->stats();
+    if (changed) {
+      EXPECT_EQ(s.views_uncached, last.views_uncached + 1) << what;
+      EXPECT_EQ(s.view_cache_builds, last.view_cache_builds) << what;
+      RenderViewer(true);
+      s = renderer_->stats();
+      EXPECT_EQ(s.view_cache_builds, last.view_cache_builds + 1) << what << ": built once still";
+    } else {
+      EXPECT_EQ(s.view_cache_hits, last.view_cache_hits + 1) << what;
+      EXPECT_EQ(s.view_cache_builds, last.view_cache_builds) << what;
+    }
+    last = s;
+  };
+  RenderViewer(true);
+  EXPECT_EQ(renderer_->stats().view_cache_builds, 1u) << "the first frame builds";
+  last = renderer_->stats();
+  expect(false, "still");
+  ASSERT_TRUE(renderer_->SetProjectors({MakeProjector(projector_, image_, 2)}).ok());
+  expect(false, "new video content");
+  ASSERT_TRUE(renderer_->SetDynamicObjects({DynamicBox{{-8, 6, 0}, 0, {1, 1, 2}, {0.2f, 0.8f, 0.2f}}}).ok());
+  expect(false, "a mover");
+  EXPECT_GT(renderer_->stats().view_cache_patches, 0u);
+  DisplayOptions display;
+  display.tint_by_age = true;
+  ASSERT_TRUE(renderer_->SetDisplayOptions(display).ok());
+  expect(false, "age tint (resolve only)");
+  display.seam_feather = 0.2;
+  ASSERT_TRUE(renderer_->SetDisplayOptions(display).ok());
+  expect(true, "seam feather");
+  Camera moved = projector_;
+  moved.world_from_camera.translation.x() += 0.5;
+  ReplaceProjector(MakeProjector(moved, {}, 2));
+  expect(true, "projector moved (and retention off)");
+  Projector disabled = MakeProjector(moved, {}, 2);
+  disabled.enabled = false;
+  ASSERT_TRUE(renderer_->SetProjectors({disabled}).ok());
+  expect(true, "projector disabled");
+  ASSERT_TRUE(renderer_->SetProjectors({MakeProjector(moved, {}, 2)}).ok());
+  expect(true, "projector enabled");
+  ASSERT_TRUE(renderer_->SetProjectors({}).ok());
+  expect(true, "projector removed");
+  EXPECT_TRUE(Near(ViewerPixel(RenderViewer(true), {-8, 0, 0}), ShadedGround())) << "no video once it is gone";
+  last = renderer_->stats();
+  viewer_.world_from_camera.translation.z() += 0.1;
+  expect(true, "view moved");
+  ASSERT_TRUE(renderer_->SetStaticMesh(mesh_).ok());
+  expect(true, "static model replaced");
+  // A view moving every frame is drawn in full and never builds.
+  for (int f = 0; f < 3; ++f) {
+    viewer_.world_from_camera.translation.z() += 0.1;
+    RenderViewer(true);
+  }
+  EXPECT_EQ(renderer_->stats().view_cache_builds, last.view_cache_builds);
+  EXPECT_EQ(renderer_->stats().views_uncached, last.views_uncached + 3);
+}
+
+TEST_F(SceneTest, ViewCache_OffOrOverlappingViewsDrawInFull) {
+  RendererOptions options;
+  options.view_cache = false;
+  absl::StatusOr<std::unique_ptr<Renderer>> uncached = Renderer::Create(options);
+  ASSERT_TRUE(uncached.ok());
+  ASSERT_TRUE((*uncached)->SetStaticMesh(mesh_).ok());
+  ASSERT_TRUE((*uncached)->SetProjectors({MakeProjector(projector_, image_, 1)}).ok());
+  std::swap(renderer_, *uncached);
+  RenderViewer();
+  RenderViewer();
+  EXPECT_EQ(renderer_->stats().view_cache_builds + renderer_->stats().view_cache_hits, 0u);
+  EXPECT_EQ(renderer_->stats().views_uncached, 2u);
+  std::swap(renderer_, *uncached);
+  const View whole = MakeView(viewer_, {0, 0, kWidth, kHeight});
+  const View inset = MakeView(projector_, {10, 10, 200, 150});
+  context_->BindFramebuffer();
+  ASSERT_TRUE(renderer_->Render({whole, inset}, kWidth, kHeight).ok());
+  EXPECT_EQ(renderer_->stats().views_uncached, 2u);
+  EXPECT_EQ(renderer_->stats().view_cache_builds, 0u);
+}
+
+// Fused poses wobble: a still camera whose pose moves its image by far less than a pixel keeps its
+// shadow map and the view caches; a real move (or any change with the tolerance off) does not.
+TEST_F(SceneTest, PoseJitter_StillCameraKeepsShadowMapAndViewCache) {
+  auto jitter_frames = [&](Renderer& r, int frames) {
+    Camera jittered = projector_;
+    for (int f = 0; f < frames; ++f) {
+      const double sign = f % 2 ? 1 : -1;
+      jittered.world_from_camera.translation = projector_.world_from_camera.translation + sign * Eigen::Vector3d(1e-4, -1e-4, 5e-5);
+      jittered.world_from_camera.rotation =
+          Eigen::Quaterniond(Eigen::AngleAxisd(sign * 2e-5, Eigen::Vector3d::UnitZ())) * projector_.world_from_camera.rotation;
+      ASSERT_TRUE(r.SetProjectors({MakeProjector(jittered, image_, 10 + f)}).ok());
+      RenderViewer();
+    }
+  };
+  RenderViewer();
+  const RenderStats still = renderer_->stats();
+  jitter_frames(*renderer_, 4);
+  EXPECT_EQ(renderer_->stats().shadow_map_renders, still.shadow_map_renders);
+  EXPECT_EQ(renderer_->stats().view_cache_builds, still.view_cache_builds);
+  EXPECT_EQ(renderer_->stats().view_cache_hits, still.view_cache_hits + 4);
+  Camera moved = projector_;
+  moved.world_from_camera.translation.x() += 0.05;  // ~2 px at 12 m
+  ASSERT_TRUE(renderer_->SetProjectors({MakeProjector(moved, image_, 20)}).ok());
+  RenderViewer();
+  EXPECT_EQ(renderer_->stats().shadow_map_renders, still.shadow_map_renders + 1);
+
+  RendererOptions options;
+  options.still_pose_tolerance_px = 0;
+  absl::StatusOr<std::unique_ptr<Renderer>> strict = Renderer::Create(options);
+  ASSERT_TRUE(strict.ok());
+  ASSERT_TRUE((*strict)->SetStaticMesh(mesh_).ok());
+  std::swap(renderer_, *strict);
+  jitter_frames(*renderer_, 3);
+  EXPECT_EQ(renderer_->stats().shadow_map_renders, 3u) << "tolerance 0: every wobble redraws";
+  std::swap(renderer_, *strict);
+  options.still_pose_tolerance_px = -1;
+  EXPECT_THAT(std::string(Renderer::Create(options).status().message()), HasSubstr("still_pose_tolerance_px"));
 }
 
 }  // namespace

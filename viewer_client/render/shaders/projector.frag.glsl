@@ -7,7 +7,8 @@
 // distortion margin). A point takes the video where it lies inside the frustum (near..far and the
 // distorted image), faces the projector and passes the shadow test. Output 0: (weight * video,
 // weight), summed by blending (last-wins: replaced); output 1: weight * fade of a retained
-// snapshot, summed (so the resolve gets the weighted mean fade).
+// snapshot, summed (so the resolve gets the weighted mean fade). With MAPPING defined it records
+// where the video comes from instead (see InsertEntry).
 //
 // Cost (llvmpipe runs every instruction for every pixel of the footprint unless a whole block of
 // pixels has discarded): the cheapest rejections come first. The window position and depth give
@@ -45,6 +46,26 @@ uniform sampler2DArrayShadow u_shadow;
 
 layout(location = 0) out vec4 o_accum;
 layout(location = 1) out vec4 o_fade;
+
+#ifdef MAPPING
+// View cache build (issue 7 performance; the renderer defines MAPPING and ENTRIES and enables
+// ARB_shader_image_load_store): instead of blending colour, the pass inserts (video u, v, layer,
+// rank) into this pixel's ENTRIES best entries, layers 0.. of u_mapping sorted by rank descending
+// (rank 0: empty). Each projector's volume covers a pixel once per draw and the renderer puts a
+// memory barrier between draws, so the read-modify-write below needs no atomics.
+layout(rgba32f) coherent uniform image2DArray u_mapping;
+
+void InsertEntry(ivec2 pixel, vec4 entry) {
+  for (int k = 0; k < ENTRIES; ++k) {
+    vec4 current = imageLoad(u_mapping, ivec3(pixel, k));
+    if (entry.w > current.w) {
+      imageStore(u_mapping, ivec3(pixel, k), entry);
+      entry = current;
+      if (entry.w <= 0.0) return;
+    }
+  }
+}
+#endif
 
 void main() {
   ivec2 pixel = ivec2(gl_FragCoord.xy);
@@ -90,18 +111,23 @@ void main() {
   float lit = texture(u_shadow, vec4(0.5 * ndc_shadow.xy + 0.5, u_layer, 0.5 * ndc_shadow.z + 0.5));
   if (lit <= 0.0) discard;
 
-  vec3 video = texture(u_video, vec3(0.5 + 0.5 * ndc.x, 0.5 - 0.5 * ndc.y, u_layer)).rgb;
+  vec2 uv = vec2(0.5 + 0.5 * ndc.x, 0.5 - 0.5 * ndc.y);
   float weight = 1.0;
-  if (u_last_wins) {
-    o_accum = vec4(video, 1.0);
-  } else {
+  if (!u_last_wins) {
     // Resolution: metres of surface per image pixel grow as distance / (focal * facing).
     float resolution = u_pinhole.x / max(distance_m, 0.5);
     float feather = u_feather > 0.0 ? smoothstep(0.0, u_feather, inside) : 1.0;
     float w = max(facing * resolution * resolution * 100.0, 1e-8);
     if (u_best_view) w = (w * w) * (w * w);
     weight = w * max(feather, 1e-3) * u_weight_scale;
-    o_accum = vec4(weight * video, weight);
   }
+#ifdef MAPPING
+  // Last-wins ranks by list order (layer + 1), the others by weight; the cached resolve reads the
+  // first entry only for last-wins.
+  InsertEntry(pixel, vec4(uv, u_layer, u_last_wins ? u_layer + 1.0 : weight));
+#else
+  vec3 video = texture(u_video, vec3(uv, u_layer)).rgb;
+  o_accum = u_last_wins ? vec4(video, 1.0) : vec4(weight * video, weight);
   o_fade = vec4(weight * u_fade, 0.0, 0.0, 1.0);
+#endif
 }
