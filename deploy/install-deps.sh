@@ -12,6 +12,8 @@ PACKAGES=(
   libopencv-dev libeigen3-dev libpcl-dev
   # rendering: GLFW window, headless EGL (Mesa llvmpipe), GL loader, math
   libglfw3-dev libglm-dev libepoxy-dev libegl-dev libgl-dev libgl1-mesa-dri libegl-mesa0 xvfb xauth
+  # window input in the tests: synthetic keyboard and mouse events on the virtual display
+  xdotool
   # the viewer's on-screen panel: Dear ImGui with its OpenGL 3 backend (static library)
   libimgui-dev
   # store

@@ -1,0 +1,122 @@
+#!/usr/bin/env bash
+# Issue 7: the viewer window takes real keyboard and mouse input. Runs deploy/demo.sh with a GLFW
+# window on a virtual X display (Xvfb) and drives it with xdotool (synthetic X events, the same path
+# a user's keyboard and mouse take through the X server):
+#   p        writes the snapshot now (the first picture: panel shown, browse view as it starts)
+#   h        hides the panel; W held flies the browse view forward; a left drag orbits it
+#   Esc      closes the window, which writes the snapshot again and ends the demo
+# and checks that the second picture differs from the first where the panel was (the panel is
+# hidden) and in the browse view (it moved), that the three camera-locked views did not move, and
+# that the viewer closed on Esc (not on a timeout).
+set -euo pipefail
+root=$1
+build=$2
+out=$(mktemp -d)
+trap 'rm -rf "$out"' EXIT
+for tool in xvfb-run xdotool; do
+  command -v "$tool" >/dev/null || { echo "FAIL: $tool missing (deploy/install-deps.sh installs it)"; exit 1; }
+done
+
+cat >"$out/drive.sh" <<'SH'
+#!/usr/bin/env bash
+# Runs inside the virtual display: waits for the viewer window, then types and drags.
+set -euo pipefail
+out=$1
+win=""
+for _ in $(seq 1 600); do
+  win=$(xdotool search --name '^AVE' 2>/dev/null | head -1 || true)
+  [ -n "$win" ] && break
+  sleep 0.1
+done
+[ -n "$win" ] || { echo "drive: no viewer window" >"$out/drive.log"; exit 1; }
+xdotool windowfocus --sync "$win" 2>/dev/null || xdotool windowfocus "$win"
+sleep 3                                  # live video and objects arrive
+xdotool key --delay 50 p                 # snapshot 1
+# The PNG is complete once it ends with its IEND chunk.
+for _ in $(seq 1 100); do
+  tail -c 8 "$out/window/quad.png" 2>/dev/null | grep -q IEND && break
+  sleep 0.1
+done
+cp "$out/window/quad.png" "$out/first.png"
+xdotool key --delay 50 h                 # hide the panel
+xdotool keydown w; sleep 1.0; xdotool keyup w       # fly forward for a second
+xdotool mousemove --window "$win" 300 200 mousedown 1 mousemove --window "$win" 420 230 mouseup 1
+sleep 1
+xdotool key Escape
+echo "drive: done" >"$out/drive.log"
+SH
+chmod +x "$out/drive.sh"
+
+cat >"$out/session.sh" <<SH
+#!/usr/bin/env bash
+"$out/drive.sh" "$out" &
+AVE_SKIP_DEPS=1 AVE_SKIP_BUILD=1 AVE_BUILD_DIR="$build" AVE_DEMO_OUT="$out/window" AVE_DEMO_FPS=5 \
+  AVE_VIEWER_FRAMES=0 timeout 150 bash "$root/deploy/demo.sh"
+SH
+chmod +x "$out/session.sh"
+xvfb-run -a -s "-screen 0 1280x1024x24" "$out/session.sh" >"$out/demo.log" 2>&1 ||
+  { cat "$out/demo.log"; echo "FAIL: the demo with a window did not end cleanly (Esc not taken?)"; exit 1; }
+grep -q "drive: done" "$out/drive.log" 2>/dev/null || { cat "$out/drive.log" 2>/dev/null; echo "FAIL: input driver did not finish"; exit 1; }
+test -s "$out/first.png" || { echo "FAIL: 'p' wrote no snapshot"; exit 1; }
+test -s "$out/window/quad.png" || { echo "FAIL: closing the window wrote no snapshot"; exit 1; }
+
+python3 - "$out/first.png" "$out/window/quad.png" <<'PY'
+import sys, zlib, struct
+
+def read_png(path):
+    # 8-bit RGB or RGBA, non-interlaced (what the viewer writes); no third-party modules needed.
+    data = open(path, 'rb').read()
+    assert data[:8] == b'\x89PNG\r\n\x1a\n', f'{path}: not a PNG'
+    pos, idat, w = 8, b'', 0
+    while pos < len(data):
+        n, kind = struct.unpack('>I4s', data[pos:pos + 8])
+        body = data[pos + 8:pos + 8 + n]
+        if kind == b'IHDR':
+            w, h, depth, ctype = struct.unpack('>IIBB', body[:10])
+            assert depth == 8 and ctype in (2, 6), f'{path}: PNG type {ctype}/{depth}'
+            bpp = 3 if ctype == 2 else 4
+        elif kind == b'IDAT':
+            idat += body
+        pos += 12 + n
+    raw, stride = zlib.decompress(idat), w * bpp
+    rows, prev = [], bytearray(stride)
+    for y in range(h):
+        f, line = raw[y * (stride + 1)], bytearray(raw[y * (stride + 1) + 1:(y + 1) * (stride + 1)])
+        for x in range(stride):
+            a = line[x - bpp] if x >= bpp else 0
+            b, c = prev[x], prev[x - bpp] if x >= bpp else 0
+            if f == 1: line[x] = (line[x] + a) & 255
+            elif f == 2: line[x] = (line[x] + b) & 255
+            elif f == 3: line[x] = (line[x] + (a + b) // 2) & 255
+            elif f == 4:
+                p = a + b - c
+                pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
+                line[x] = (line[x] + (a if pa <= pb and pa <= pc else b if pb <= pc else c)) & 255
+        rows.append(line)
+        prev = line
+    return w, h, bpp, rows
+
+def mean_diff(img1, img2, x0, y0, x1, y1):
+    (w, h, bpp, r1), (_, _, _, r2) = img1, img2
+    total = n = 0
+    for y in range(y0, y1, 4):
+        for x in range(x0, x1, 4):
+            for k in range(3):
+                total += abs(r1[y][x * bpp + k] - r2[y][x * bpp + k])
+            n += 3
+    return total / n
+
+first, last = read_png(sys.argv[1]), read_png(sys.argv[2])
+assert first[:2] == last[:2], 'snapshot sizes differ'
+w, h = first[:2]
+panel = mean_diff(first, last, 20, 40, 400, 280)          # under the panel (top left)
+browse = mean_diff(first, last, 440, 20, w // 2 - 10, h // 2 - 10)  # browse view right of the panel
+# The three camera-locked views only change by their video and the moving objects.
+locked = mean_diff(first, last, w // 2 + 90, h // 2 + 20, w - 90, h - 20)
+print(f'mean |difference| in levels: panel area {panel:.1f}, browse view {browse:.1f}, a locked view {locked:.1f}')
+assert panel > 12, "'h' did not hide the panel"
+assert browse > 12, 'the browse view did not move under W and the drag'
+assert locked < browse, 'a camera-locked view changed more than the browse view'
+PY
+if [ -n "${AVE_TEST_KEEP:-}" ]; then mkdir -p "$AVE_TEST_KEEP" && cp "$out/first.png" "$out/window/quad.png" "$AVE_TEST_KEEP/"; fi
+echo "window input: ok"
