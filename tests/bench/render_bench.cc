@@ -53,6 +53,9 @@ struct RenderBenchOptions {
   int shadow_cameras = 3;
   int truth_stride = 2;
   std::string plot = "render_bench.png";
+  bool cache_only = false;  // skip the cache-off rows and the exact-vs-cached comparison (profiling)
+  bool per_projector = false;  // RendererOptions::combined_live_passes off (the passes before h7f)
+  double moving_scale = viewer::RendererOptions().moving_view_scale;
 };
 
 std::vector<int> ParseInts(const std::string& text) {
@@ -369,9 +372,12 @@ int RunRender(const RenderBenchOptions& o) {
   std::printf("| ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |\n");
   std::vector<std::unique_ptr<viewer::Renderer>> renderers;  // [0] cache off, [1] on
   for (bool cache : {false, true}) {
+    if (!cache && o.cache_only) continue;
     viewer::RendererOptions options;
     options.shadow_map_size = 1024;
     options.view_cache = cache;
+    options.combined_live_passes = !o.per_projector;
+    options.moving_view_scale = o.moving_scale;
     absl::StatusOr<std::unique_ptr<viewer::Renderer>> renderer = viewer::Renderer::Create(options);
     if (!renderer.ok() || !(*renderer)->SetStaticMesh(mesh).ok()) {
       std::cerr << "ave-bench render: renderer: " << renderer.status().message() << "\n";
@@ -405,6 +411,7 @@ int RunRender(const RenderBenchOptions& o) {
     }
     for (size_t c = 0; c < renderers.size(); ++c) {
       viewer::Renderer& r = *renderers[c];
+      const bool cache_on = o.cache_only || c == 1;
       if (!r.SetProjectors(some).ok()) return 1;
       TimeFrames(r, **context, views, 2, [&](int) { live_frame(r, some); });
       const viewer::RenderStats before = r.stats();
@@ -422,6 +429,9 @@ int RunRender(const RenderBenchOptions& o) {
         pose.translation += Eigen::Vector3d(0.5 * (f + 1), 0.3 * (f + 1), 0);
         flying[0].view = GlViewFromWorld(pose);
       });
+      if (cache_on && n == std::min(3, max_count)) {  // the last flying frame: the browse view drawn reduced
+        WritePng("render_bench_quad_flying.png", *(*context)->ReadPixels(), o.width, o.height);
+      }
       Timing t_turn;
       if (n > 0) {
         t_turn = TimeFrames(r, **context, views, o.frames, [&](int f) {
@@ -434,7 +444,7 @@ int RunRender(const RenderBenchOptions& o) {
         t_turn = t_still;
       }
       std::printf("| %d | %s | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %.1f | %llu | %llu / %llu / %llu |\n",
-                  n, c ? "on" : "off", t_still.cpu_ms, t_still.wall_ms, 1000 / t_still.wall_ms, t_empty.cpu_ms,
+                  n, cache_on ? "on" : "off", t_still.cpu_ms, t_still.wall_ms, 1000 / t_still.wall_ms, t_empty.cpu_ms,
                   1000 / t_empty.wall_ms, t_fly.cpu_ms, t_fly.wall_ms,
                   1000 / t_fly.wall_ms, t_turn.cpu_ms, 1000 / t_turn.wall_ms,
                   static_cast<unsigned long long>(t_still.shadow_renders),
@@ -442,9 +452,9 @@ int RunRender(const RenderBenchOptions& o) {
                   static_cast<unsigned long long>(after.view_cache_hits - before.view_cache_hits),
                   static_cast<unsigned long long>(after.view_cache_patches - before.view_cache_patches));
       std::fflush(stdout);
-      (c ? still_on : still_off).y.push_back(t_still.cpu_ms);
-      if (c) empty_on.y.push_back(t_empty.cpu_ms);
-      (c ? fly_on : fly_off).y.push_back(t_fly.cpu_ms);
+      (cache_on ? still_on : still_off).y.push_back(t_still.cpu_ms);
+      if (cache_on) empty_on.y.push_back(t_empty.cpu_ms);
+      (cache_on ? fly_on : fly_off).y.push_back(t_fly.cpu_ms);
     }
     x_counts.push_back(std::to_string(n));
   }
@@ -466,6 +476,7 @@ int RunRender(const RenderBenchOptions& o) {
   std::printf("| ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
   std::vector<int> compared = {std::min(3, max_count)};
   if (max_count > 3) compared.push_back(max_count);
+  if (o.cache_only) compared.clear();
   for (int n : compared) {
     if (n == 0) continue;
     std::vector<viewer::Projector> some(all.begin(), all.begin() + n);
@@ -575,6 +586,10 @@ Runner AddRenderBench(CLI::App& sub) {
   sub.add_option("--shadow-cameras", o->shadow_cameras, "cameras in the shadow-size part")->check(CLI::Range(1, 64));
   sub.add_option("--truth-stride", o->truth_stride, "ray-cast every n-th pixel")->check(CLI::Range(1, 64));
   sub.add_option("--plot", o->plot, "PNG plot path");
+  sub.add_option("--moving-scale", o->moving_scale, "RendererOptions::moving_view_scale (1: moving views in full)")
+      ->check(CLI::Range(1.0, 4.0));
+  sub.add_flag("--per-projector", o->per_projector, "one pass per live projector (combined_live_passes off)");
+  sub.add_flag("--cache-only", o->cache_only, "only the cache-on rows (no cache-off rows, no exact-vs-cached part)");
   return [o] { return RunRender(*o); };
 }
 

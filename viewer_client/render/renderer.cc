@@ -31,6 +31,8 @@ constexpr GLint kRetainedUnit = 6;
 constexpr GLint kFadeUnit = 7;
 constexpr GLint kMappingUnit = 8;
 constexpr GLuint kMappingImageUnit = 0;
+// Live projectors per combined pass (projector.frag.glsl COMBINED: BATCH); 48 floats of uniforms each.
+constexpr int kCombinedBatch = 16;
 // Depth bias of the shadow pass, in addition to the normal offset of the projector shader: the
 // slope term absorbs the depth change across one texel on grazing ground (paper section 8).
 constexpr float kShadowSlopeBias = 1.5f;
@@ -56,7 +58,7 @@ struct LineVertex {
 
 using GlMatrix = std::array<float, 16>;
 
-enum class Pass { kUpload, kShadow, kGbuffer, kProjector, kResolve, kLines };
+enum class Pass { kUpload, kShadow, kGbuffer, kProjector, kCombined, kResolve, kLines };
 
 // Every fixed-function state change of the renderer is here (STYLE habit 6).
 void ApplyPassState(Pass pass, bool blend = false) {
@@ -95,6 +97,17 @@ void ApplyPassState(Pass pass, bool blend = false) {
       glEnable(GL_CULL_FACE);
       glCullFace(GL_FRONT);
       glEnable(GL_DEPTH_CLAMP);
+      if (blend) {
+        glEnable(GL_BLEND);
+        glBlendEquation(GL_FUNC_ADD);
+        glBlendFunc(GL_ONE, GL_ONE);
+      }
+      break;
+    case Pass::kCombined:
+      // Full-screen triangles of the combined live passes: added like projector passes.
+      glEnable(GL_SCISSOR_TEST);
+      glDisable(GL_DEPTH_TEST);
+      glDepthMask(GL_FALSE);
       if (blend) {
         glEnable(GL_BLEND);
         glBlendEquation(GL_FUNC_ADD);
@@ -352,6 +365,7 @@ struct ShadowSlot {
   uint64_t static_version = 0;
   uint64_t dynamic_version = 0;
   bool dynamic_has_models = false;  // the dynamic layer holds some model (else it equals the static one)
+  Viewport dynamic_rect;            // where (shadow-map pixels) it may differ from the static layer
 };
 
 // One layer set: a shadow-map array, and optionally a second one with dynamic models added.
@@ -646,6 +660,12 @@ Viewport Union(const Viewport& a, const Viewport& b) {
   return Viewport{x0, y0, x1 - x0, y1 - y0};
 }
 
+Viewport Intersection(const Viewport& a, const Viewport& b) {
+  const int x0 = std::max(a.x, b.x), y0 = std::max(a.y, b.y);
+  const int x1 = std::min(a.x + a.width, b.x + b.width), y1 = std::min(a.y + a.height, b.y + b.height);
+  return Viewport{x0, y0, std::max(0, x1 - x0), std::max(0, y1 - y0)};
+}
+
 // The pixels of `viewport` that the convex hull of the points may cover in a view with this
 // matrix, padded by two pixels. Points are homogeneous: w = 0 is a direction, standing for the
 // whole ray towards it from the other points (its image ends at the direction's vanishing point).
@@ -692,8 +712,9 @@ void AppendMatrix(const Eigen::Matrix4d& m, std::vector<double>& out) { out.inse
 struct Renderer::Impl {
   RendererOptions options;
   GLuint gbuffer_program = 0, shadow_program = 0, line_program = 0;
-  // Projector passes: colour accumulation, and the view cache's mapping build (MAPPING).
-  Program projector, mapping;
+  // Projector passes: colour accumulation, and the view cache's mapping build (MAPPING); the live
+  // projectors of a view in batches of kCombinedBatch full-screen passes (COMBINED).
+  Program projector, mapping, combined;
   // Resolve variants, index any_live + 2 * any_retained + 4 * cached + 8 * shadowed
   // (resolve.frag.glsl: LIVE, RETAINED, CACHED, SHADOWED; shadowed only with cached and live).
   std::array<Program, 16> resolve;
@@ -721,6 +742,8 @@ struct Renderer::Impl {
   GLuint cache_color = 0, cache_normal = 0, cache_depth = 0, cache_retained = 0, cache_fade = 0, mapping_array = 0;
   std::vector<ViewCache> view_caches;  // by the view's index in Render's views
   std::vector<Bounds> model_bounds;    // per dynamic model
+  // Views of the last Render drawn at reduced resolution: (viewport, the part of it drawn into).
+  std::vector<std::pair<Viewport, Viewport>> reduced_views;
 
   std::vector<Projector> projectors;  // image_rgba cleared: only valid during SetProjectors
   std::vector<std::array<Eigen::Vector3d, 16>> frustums;
@@ -751,7 +774,7 @@ struct Renderer::Impl {
     glDeleteTextures(9, textures);
     const GLuint fbos[] = {fbo_video_src, fbo_video_dst, fbo_shadow_src, fbo_shadow_dst, fbo_gbuffer, fbo_accum};
     glDeleteFramebuffers(6, fbos);
-    for (GLuint program : {gbuffer_program, shadow_program, line_program, projector.id, mapping.id}) {
+    for (GLuint program : {gbuffer_program, shadow_program, line_program, projector.id, mapping.id, combined.id}) {
       if (program) glDeleteProgram(program);
     }
     for (const Program& program : resolve) {
@@ -981,10 +1004,28 @@ struct Renderer::Impl {
       glBindFramebuffer(GL_DRAW_FRAMEBUFFER, fbo_shadow_dst);
       glFramebufferTextureLayer(GL_DRAW_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, arrays.dynamic_array, 0, layer);
       if (absl::Status s = CheckFramebuffer(GL_DRAW_FRAMEBUFFER, "dynamic shadow map"); !s.ok()) return s;
-      glBlitFramebuffer(0, 0, size, size, 0, 0, size, size, GL_DEPTH_BUFFER_BIT, GL_NEAREST);
+      // Only where the models were or are does the dynamic layer differ from the static one: the
+      // copy (a full-size blit costs llvmpipe a 1024^2 depth pass per projector) is limited to that.
+      const Viewport full{0, 0, size, size};
+      std::optional<Viewport> now;
+      if (models_inside) {
+        std::vector<Eigen::Vector4d> points;
+        for (const Bounds& b : model_bounds) {
+          for (const Eigen::Vector3d& c : b.Corners()) points.push_back(c.homogeneous());
+        }
+        now = ScreenRect(points, shadow_clip, full);
+      }
+      std::optional<Viewport> copy = static_dirty ? std::optional<Viewport>(full) : now;
+      if (!static_dirty && slot.dynamic_has_models) copy = copy ? Union(*copy, slot.dynamic_rect) : slot.dynamic_rect;
+      if (copy) {
+        const Viewport& r = *copy;
+        glBlitFramebuffer(r.x, r.y, r.x + r.width, r.y + r.height, r.x, r.y, r.x + r.width, r.y + r.height,
+                          GL_DEPTH_BUFFER_BIT, GL_NEAREST);
+      }
       dynamic_mesh.Draw(GL_TRIANGLES);
       ++stats.dynamic_shadow_updates;
-      slot.dynamic_has_models = models_inside;
+      slot.dynamic_has_models = now.has_value();
+      slot.dynamic_rect = now.value_or(Viewport{});
     }
     slot.valid = true;
     slot.clip_from_local = clip_from_local;
@@ -1191,12 +1232,18 @@ struct Renderer::Impl {
   // working G-buffer and accumulation targets.
   // shadowed (with a cache and live passes): cached entries are tested against the shadow maps
   // with the dynamic models (the layers' matrices come from `passes`).
+  // drawn (uncached): the viewport the working targets hold the view in (the view's own, or a
+  // reduced one at the same corner: scaled up).
   void Resolve(const View& view, bool any_live, bool any_retained, const ViewCache* cache = nullptr,
-               const std::vector<ProjectorPass>* shadowed = nullptr) {
+               const std::vector<ProjectorPass>* shadowed = nullptr, const Viewport* drawn = nullptr) {
     ApplyPassState(Pass::kResolve);
     const int variant = (any_live ? 1 : 0) + (any_retained ? 2 : 0) + (cache ? 4 : 0) + (shadowed ? 8 : 0);
     glUseProgram(resolve[variant].id);
     const Uniforms& u = resolve[variant].u;
+    const Viewport& v = view.viewport;
+    glUniform2f(u["u_source_origin"], static_cast<float>(v.x), static_cast<float>(v.y));
+    glUniform2f(u["u_source_scale"], drawn ? static_cast<float>(drawn->width) / v.width : 1.0f,
+                drawn ? static_cast<float>(drawn->height) / v.height : 1.0f);
     glUniform1i(u["u_gbuffer_color"], kGbufferColorUnit);
     glUniform1i(u["u_gbuffer_depth"], kGbufferDepthUnit);
     glUniform1i(u["u_live"], kLiveUnit);
@@ -1227,7 +1274,7 @@ struct Renderer::Impl {
         const ProjectorGl g = MakeProjectorGl(*pass.projector, options.shadow_map_size);
         std::copy(g.shadow_clip_from_local.begin(), g.shadow_clip_from_local.end(), matrices.begin() + 16 * pass.layer);
         for (int k = 0; k < 3; ++k) position_offset[4 * pass.layer + k] = static_cast<float>(pass.projector->position[k]);
-        position_offset[4 * pass.layer + 3] = g.normal_offset;
+        position_offset[4 * pass.layer + 3] = slots[pass.layer].shadow.dynamic_has_models ? g.normal_offset : -1.0f;
       }
       glUniformMatrix4fv(u["u_shadow_clip_from_local"], kMaxProjectors, GL_FALSE, matrices.data());
       glUniform4fv(u["u_position_offset"], kMaxProjectors, position_offset.data());
@@ -1243,8 +1290,9 @@ struct Renderer::Impl {
 
   // The projector passes of one view into the working accumulation targets, then its resolve
   // into `target`, within the current scissor box. The working G-buffer must hold the view.
+  // `output`: the view as it is shown when `view` is a reduced copy of it (moving_view_scale).
   void AccumulateAndResolve(const View& view, const std::vector<ProjectorPass>& passes, const std::vector<char>& visible,
-                            bool any_live, bool any_retained, GLuint target) {
+                            bool any_live, bool any_retained, GLuint target, const View* output = nullptr) {
     const bool last_wins = options.display.overlap == OverlapPolicy::kLastWins;
     glBindFramebuffer(GL_FRAMEBUFFER, fbo_accum);
     // Only the targets this view's passes write are cleared, and only those the resolve reads.
@@ -1262,12 +1310,93 @@ struct Renderer::Impl {
     const GLenum live_buffers[] = {GL_COLOR_ATTACHMENT0, GL_NONE};
     glDrawBuffers(2, live_buffers);
     ApplyPassState(Pass::kProjector, /*blend=*/!last_wins);
-    for (size_t k = 0; k < passes.size(); ++k) {
-      if (visible[k] && !passes[k].retained) DrawPass(projector.u, passes[k], k, last_wins);
+    if (options.combined_live_passes) {
+      DrawCombinedLivePasses(view, passes, visible, last_wins);
+    } else {
+      for (size_t k = 0; k < passes.size(); ++k) {
+        if (visible[k] && !passes[k].retained) DrawPass(projector.u, passes[k], k, last_wins);
+      }
     }
-    if (any_retained) DrawRetainedPasses(passes, visible);
+    if (any_retained) {
+      BindProjectorInputs(view, projector, gbuffer_normal, gbuffer_depth);
+      DrawRetainedPasses(passes, visible);
+    }
     glBindFramebuffer(GL_FRAMEBUFFER, target);
-    Resolve(view, any_live, any_retained);
+    if (output) {
+      const Viewport& o = output->viewport;
+      glViewport(o.x, o.y, o.width, o.height);
+      glScissor(o.x, o.y, o.width, o.height);
+      Resolve(*output, any_live, any_retained, nullptr, nullptr, &view.viewport);
+    } else {
+      Resolve(view, any_live, any_retained);
+    }
+  }
+
+  // The view's visible live passes whose footprint meets the current scissor box, kCombinedBatch at
+  // a time in one full-screen pass each (scissored to the batch's footprints), into the bound
+  // accumulation target (draw buffer 0, blend state set): the G-buffer is read and the point
+  // reconstructed once per pixel and batch instead of once per projector.
+  void DrawCombinedLivePasses(const View& view, const std::vector<ProjectorPass>& passes,
+                              const std::vector<char>& visible, bool last_wins) {
+    GLint box[4];
+    glGetIntegerv(GL_SCISSOR_BOX, box);
+    const Viewport scissor{box[0], box[1], box[2], box[3]};
+    const Eigen::Matrix4d clip_from_local = view.projection * view.view;
+    std::vector<std::pair<const ProjectorPass*, Viewport>> reach;
+    for (size_t k = 0; k < passes.size(); ++k) {
+      if (!visible[k] || passes[k].retained) continue;
+      std::vector<Eigen::Vector4d> corners;
+      for (const Eigen::Vector3d& c : passes[k].corners) corners.push_back(c.homogeneous());
+      const std::optional<Viewport> rect = ScreenRect(corners, clip_from_local, view.viewport);
+      if (rect && Overlap(*rect, scissor)) reach.emplace_back(&passes[k], Intersection(*rect, scissor));
+    }
+    if (reach.empty()) return;
+    ApplyPassState(Pass::kCombined, /*blend=*/!last_wins);
+    glUseProgram(combined.id);
+    const Uniforms& u = combined.u;
+    glUniform1i(u["u_gbuffer_normal"], kGbufferNormalUnit);
+    glUniform1i(u["u_gbuffer_depth"], kGbufferDepthUnit);
+    glUniform1i(u["u_video"], kVideoUnit);
+    glUniform1i(u["u_shadow"], kShadowUnit);
+    glUniformMatrix4fv(u["u_local_from_window"], 1, GL_FALSE, ToGlArray(LocalFromWindow(view)).data());
+    glUniform1f(u["u_feather"], static_cast<float>(options.display.seam_feather));
+    glUniform1i(u["u_best_view"], options.display.overlap == OverlapPolicy::kBestView ? 1 : 0);
+    glUniform1i(u["u_last_wins"], last_wins ? 1 : 0);
+    glUniform1f(u["u_weight_scale"], 1.0f);
+    glBindVertexArray(empty_vao);
+    for (size_t first = 0; first < reach.size(); first += kCombinedBatch) {
+      const size_t count = std::min<size_t>(kCombinedBatch, reach.size() - first);
+      std::vector<float> clips(16 * count), shadow_clips(16 * count), pinholes(4 * count), distortions(4 * count),
+          position_layers(4 * count), extras(4 * count);
+      Viewport area = reach[first].second;
+      for (size_t k = 0; k < count; ++k) {
+        const auto& [pass, rect] = reach[first + k];
+        area = Union(area, rect);
+        const Projector& p = *pass->projector;
+        const ProjectorGl g = MakeProjectorGl(p, options.shadow_map_size);
+        std::copy(g.clip_from_local.begin(), g.clip_from_local.end(), clips.begin() + 16 * k);
+        std::copy(g.shadow_clip_from_local.begin(), g.shadow_clip_from_local.end(), shadow_clips.begin() + 16 * k);
+        std::copy(g.pinhole, g.pinhole + 4, pinholes.begin() + 4 * k);
+        std::copy(g.distortion, g.distortion + 4, distortions.begin() + 4 * k);
+        for (int i = 0; i < 3; ++i) position_layers[4 * k + i] = static_cast<float>(p.position[i]);
+        position_layers[4 * k + 3] = static_cast<float>(pass->layer);
+        const float e[4] = {static_cast<float>(1 / DistortionMargin(p)), g.distortion[4], g.distorted ? 1.0f : 0.0f,
+                            g.normal_offset};
+        std::copy(e, e + 4, extras.begin() + 4 * k);
+      }
+      const GLsizei n = static_cast<GLsizei>(count);
+      glUniform1i(u["u_count"], n);
+      glUniformMatrix4fv(u["u_clips"], n, GL_FALSE, clips.data());
+      glUniformMatrix4fv(u["u_shadow_clips"], n, GL_FALSE, shadow_clips.data());
+      glUniform4fv(u["u_pinholes"], n, pinholes.data());
+      glUniform4fv(u["u_distortions"], n, distortions.data());
+      glUniform4fv(u["u_position_layers"], n, position_layers.data());
+      glUniform4fv(u["u_extras"], n, extras.data());
+      glScissor(area.x, area.y, area.width, area.height);
+      glDrawArrays(GL_TRIANGLES, 0, 3);
+      stats.projector_passes += count;
+    }
+    glScissor(scissor.x, scissor.y, scissor.width, scissor.height);
   }
 
   void DrawPass(const Uniforms& u, const ProjectorPass& pass, size_t index, bool last_wins) {
@@ -1462,16 +1591,28 @@ struct Renderer::Impl {
   }
 
   // The working G-buffer of a view, then its projector passes and resolve: the full frame.
+  // reduced (RendererOptions::moving_view_scale > 1): drawn at that fraction of the viewport and
+  // scaled up in the resolve; the view's slot records it for ReadLinearDepth.
   void DrawViewExact(const View& view, const std::vector<ProjectorPass>& passes, const std::vector<char>& visible,
-                     bool any_live, bool any_retained, GLuint target) {
+                     bool any_live, bool any_retained, GLuint target, bool reduced = false) {
+    View drawn = view;
+    const double scale = reduced ? options.moving_view_scale : 1.0;
+    Viewport& d = drawn.viewport;
+    d.width = std::max(1, static_cast<int>(std::ceil(view.viewport.width / scale)));
+    d.height = std::max(1, static_cast<int>(std::ceil(view.viewport.height / scale)));
+    const bool smaller = d.width != view.viewport.width || d.height != view.viewport.height;
+    glViewport(d.x, d.y, d.width, d.height);
+    glScissor(d.x, d.y, d.width, d.height);
     glBindFramebuffer(GL_FRAMEBUFFER, fbo_gbuffer);
     ApplyPassState(Pass::kGbuffer);
     glClearColor(0, 0, 0, 0);
     glClearDepth(1.0);
     glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
-    DrawGbuffer(view, /*with_static=*/true, /*with_dynamic=*/true);
-    AccumulateAndResolve(view, passes, visible, any_live, any_retained, target);
+    DrawGbuffer(drawn, /*with_static=*/true, /*with_dynamic=*/true);
+    AccumulateAndResolve(drawn, passes, visible, any_live, any_retained, target, smaller ? &view : nullptr);
+    if (smaller) reduced_views.push_back({view.viewport, d});
     ++stats.views_uncached;
+    if (smaller) ++stats.views_reduced;
   }
 
   // A still view: its cache resolved against the current video, then the rectangles dynamic
@@ -1489,7 +1630,7 @@ struct Renderer::Impl {
     cache.last_signature = signature;
     if ((!cache.valid || cache.signature != signature) && !still) {
       cache.valid = false;
-      DrawViewExact(view, passes, visible, any_live, any_retained, target);
+      DrawViewExact(view, passes, visible, any_live, any_retained, target, /*reduced=*/true);
       return;
     }
     if (!cache.valid || cache.signature != signature) {
@@ -1598,6 +1739,14 @@ absl::StatusOr<std::unique_ptr<Renderer>> Renderer::Create(const RendererOptions
       !s.ok()) {
     return s;
   }
+  if (absl::Status s = build(impl->combined, "shaders/resolve.vert.glsl", "shaders/projector.frag.glsl",
+                             "#define COMBINED\n#define BATCH " + std::to_string(kCombinedBatch) + "\n",
+                             {"u_gbuffer_normal", "u_gbuffer_depth", "u_local_from_window", "u_feather", "u_best_view",
+                              "u_last_wins", "u_weight_scale", "u_video", "u_shadow", "u_count", "u_clips",
+                              "u_shadow_clips", "u_pinholes", "u_distortions", "u_position_layers", "u_extras"});
+      !s.ok()) {
+    return s;
+  }
   if (impl->cache_supported) {
     const std::string defines = "#extension GL_ARB_shader_image_load_store : require\n#define MAPPING\n" + entries;
     if (absl::Status s = build(impl->mapping, "shaders/projector.vert.glsl", "shaders/projector.frag.glsl", defines,
@@ -1616,7 +1765,7 @@ absl::StatusOr<std::unique_ptr<Renderer>> Renderer::Create(const RendererOptions
                                {"u_gbuffer_color", "u_gbuffer_depth", "u_live", "u_retained", "u_fade", "u_clear_color",
                                 "u_tint_by_age", "u_fade_scale", "u_mapping", "u_video", "u_last_wins",
                                 "u_gbuffer_normal", "u_local_from_window", "u_shadow", "u_shadow_clip_from_local",
-                                "u_position_offset"});
+                                "u_position_offset", "u_source_origin", "u_source_scale"});
         !s.ok()) {
       return s;
     }
@@ -1899,6 +2048,7 @@ absl::Status Renderer::Render(const std::vector<View>& views, int framebuffer_wi
     }
   }
   d.volumes.Upload(volume_vertices, GL_STREAM_DRAW);
+  d.reduced_views.clear();
 
   if (d.view_caches.size() > views.size()) d.view_caches.resize(views.size());
   for (size_t slot = 0; slot < views.size(); ++slot) {
@@ -1962,6 +2112,26 @@ absl::StatusOr<std::vector<float>> Renderer::ReadLinearDepth(const View& view) c
     glReadPixels(r.x, r.y, r.width, r.height, GL_RGBA, GL_UNSIGNED_BYTE, color.data() + 4 * offset);
   }
   glPixelStorei(GL_PACK_ROW_LENGTH, 0);
+  // A view drawn at reduced resolution: its working G-buffer part, scaled up as the resolve did.
+  for (const auto& [shown, drawn] : d.reduced_views) {
+    if (shown.x != v.x || shown.y != v.y || shown.width != v.width || shown.height != v.height) continue;
+    std::vector<float> small_depth(static_cast<size_t>(drawn.width) * drawn.height);
+    std::vector<uint8_t> small_color(small_depth.size() * 4);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, d.fbo_gbuffer);
+    glReadPixels(drawn.x, drawn.y, drawn.width, drawn.height, GL_DEPTH_COMPONENT, GL_FLOAT, small_depth.data());
+    glReadBuffer(GL_COLOR_ATTACHMENT0);
+    glReadPixels(drawn.x, drawn.y, drawn.width, drawn.height, GL_RGBA, GL_UNSIGNED_BYTE, small_color.data());
+    for (int row = 0; row < v.height; ++row) {
+      const int src_row = std::min(drawn.height - 1, static_cast<int>((row + 0.5) * drawn.height / v.height));
+      for (int col = 0; col < v.width; ++col) {
+        const int src_col = std::min(drawn.width - 1, static_cast<int>((col + 0.5) * drawn.width / v.width));
+        const size_t src = static_cast<size_t>(src_row) * drawn.width + src_col;
+        const size_t dst = static_cast<size_t>(row) * v.width + col;
+        window_depth[dst] = small_depth[src];
+        std::copy_n(&small_color[4 * src], 4, &color[4 * dst]);
+      }
+    }
+  }
   if (absl::Status s = CheckGl("ReadLinearDepth"); !s.ok()) return s;
   const Eigen::Matrix4d eye_from_clip = view.projection.inverse();
   std::vector<float> depth(window_depth.size());

@@ -36,7 +36,9 @@
 // Still views (RendererOptions::view_cache): a view whose inputs other than the video content and
 // the dynamic models did not change since its last frame reuses its G-buffer and a per-pixel
 // mapping of the projectors reaching each pixel; only the resolve and the rectangles around
-// dynamic models are drawn again.
+// dynamic models are drawn again. A view whose inputs change every frame (flying, a turning
+// camera) is drawn at reduced resolution (RendererOptions::moving_view_scale) until it stops, its
+// live projectors in combined full-screen passes (RendererOptions::combined_live_passes).
 //
 // Needs a current GL 3.3+ core context (gl_context.h) for its whole life: create it after the
 // context is current, call it on that thread, destroy it before the context.
@@ -202,6 +204,18 @@ struct RendererOptions {
   // framebuffer pixel and a texel fetch per covered pixel in every cached frame; see
   // docs/BENCHMARKS.md for the difference to the exact blend where more cameras overlap.
   int view_cache_entries = 4;
+  // Live projectors of a view drawn exactly (flying, turning, model rectangles over a cached view,
+  // cache off) in full-screen passes of up to 16 projectors each, scissored to their footprints:
+  // the G-buffer read and the point reconstruction happen once per pixel instead of once per
+  // projector (issue 7 performance). false: one pass per projector over its frustum volume's back
+  // faces, as before (same picture; kept for comparison).
+  bool combined_live_passes = true;
+  // A view whose inputs changed since its previous frame (flying, a turning camera; view cache on)
+  // is drawn at 1 / moving_view_scale of its viewport's width and height and scaled up (nearest)
+  // in the resolve: the per-pixel work of a frame the next one replaces drops by its square. The
+  // first frame its inputs stay the same is drawn at full resolution (the cache build). 1: full
+  // resolution always. Lines are drawn at full resolution.
+  double moving_view_scale = 2;
   DisplayOptions display;
 
   // Empty when usable; otherwise names the first bad field.
@@ -227,6 +241,7 @@ struct RenderStats {
   // Views drawn in full: cache off or unsupported, overlapping views, or inputs that changed since
   // the view's previous frame (the cache is built on the first frame they stay the same).
   uint64_t views_uncached = 0;
+  uint64_t views_reduced = 0;  // of those, drawn at reduced resolution (RendererOptions::moving_view_scale)
 };
 
 // Most live projector entries the view cache keeps per pixel (RendererOptions::view_cache_entries).

@@ -153,7 +153,7 @@ class SceneTest : public ::testing::Test {
     absl::StatusOr<std::unique_ptr<HeadlessContext>> context = CreateHeadlessContext(kWidth, kHeight);
     ASSERT_TRUE(context.ok()) << "headless EGL must work here: " << context.status();
     context_ = std::move(*context);
-    absl::StatusOr<std::unique_ptr<Renderer>> renderer = Renderer::Create();
+    absl::StatusOr<std::unique_ptr<Renderer>> renderer = Renderer::Create(Options());
     ASSERT_TRUE(renderer.ok()) << renderer.status();
     renderer_ = std::move(*renderer);
     mesh_ = GroundAndBox();
@@ -162,6 +162,7 @@ class SceneTest : public ::testing::Test {
     ASSERT_TRUE(renderer_->SetProjectors({MakeProjector(projector_, image_, 1)}).ok());
   }
   void TearDown() override { renderer_.reset(); }
+  virtual RendererOptions Options() const { return {}; }
 
   std::vector<uint8_t> RenderViewer(bool draw_frustums = false) { return RenderFrom(viewer_, draw_frustums); }
 
@@ -1074,6 +1075,9 @@ class ViewCacheTest : public SceneTest {
     SceneTest::SetUp();
     RendererOptions options;
     options.view_cache = false;
+    // The reference draws one pass per projector; the cached renderer draws its uncached frames
+    // and model rectangles with the combined live passes: both must give the same picture.
+    options.combined_live_passes = false;
     absl::StatusOr<std::unique_ptr<Renderer>> exact = Renderer::Create(options);
     ASSERT_TRUE(exact.ok()) << exact.status();
     exact_ = std::move(*exact);
@@ -1083,6 +1087,13 @@ class ViewCacheTest : public SceneTest {
   void TearDown() override {
     exact_.reset();
     SceneTest::TearDown();
+  }
+
+  // Frames whose inputs changed are compared too: drawn at full resolution here.
+  RendererOptions Options() const override {
+    RendererOptions options;
+    options.moving_view_scale = 1;
+    return options;
   }
 
   // Applies `step` to both renderers, renders both, and checks the cached picture against the
@@ -1165,6 +1176,52 @@ TEST_F(ViewCacheTest, CachedFramesEqualExactOnesAcrossPoliciesLensesRetentionAnd
   Step(display(OverlapPolicy::kBlendBestView, true), "age tint");
   EXPECT_EQ(renderer_->stats().view_cache_builds, builds) << "fading and tint reuse the cache";
   Step([](Renderer& r) { return r.SetDynamicObjects({}); }, "movers gone");
+}
+
+// A view that moves every frame is drawn at half resolution (moving_view_scale 2) and scaled up;
+// the first frame it stays still is drawn in full (the cache build), as the exact renderer does.
+TEST_F(SceneTest, MovingView_DrawnAtReducedResolutionThenInFullWhenStill) {
+  RendererOptions exact_options;
+  exact_options.view_cache = false;
+  absl::StatusOr<std::unique_ptr<Renderer>> exact = Renderer::Create(exact_options);
+  ASSERT_TRUE(exact.ok()) << exact.status();
+  ASSERT_TRUE((*exact)->SetStaticMesh(mesh_).ok());
+  ASSERT_TRUE((*exact)->SetProjectors({MakeProjector(projector_, image_, 1)}).ok());
+  auto render = [&](Renderer& r, const Camera& camera, std::vector<float>* depth) {
+    const View view = MakeView(camera, {0, 0, kWidth, kHeight});
+    context_->BindFramebuffer();
+    EXPECT_TRUE(r.Render({view}, kWidth, kHeight).ok());
+    absl::StatusOr<std::vector<uint8_t>> pixels = context_->ReadPixels();
+    EXPECT_TRUE(pixels.ok());
+    if (depth) *depth = *r.ReadLinearDepth(view);
+    return pixels.ok() ? *pixels : std::vector<uint8_t>();
+  };
+  Camera moving = viewer_;
+  render(*renderer_, moving, nullptr);  // first frame: counts as still, full resolution
+  EXPECT_EQ(renderer_->stats().views_reduced, 0u);
+  for (int step = 1; step <= 3; ++step) {
+    moving.world_from_camera.translation += Eigen::Vector3d(0.2, 0.1, 0);
+    std::vector<float> depth, exact_depth;
+    const std::vector<uint8_t> fast = render(*renderer_, moving, &depth);
+    const std::vector<uint8_t> full = render(**exact, moving, &exact_depth);
+    EXPECT_EQ(renderer_->stats().views_reduced, static_cast<uint64_t>(step));
+    const PictureDifference d = Compare(fast, full);
+    // Nearest upscaling: edges move by up to a pixel, flat areas agree.
+    EXPECT_GT(d.max, 3) << "step " << step << ": drawn in full, not reduced";
+    EXPECT_LT(d.mean, 3.0) << "step " << step;
+    EXPECT_LT(d.share_over_2, 0.1) << "step " << step;
+    ASSERT_EQ(depth.size(), exact_depth.size());
+    size_t far_off = 0;
+    for (size_t k = 0; k < depth.size(); ++k) {
+      const bool both_inf = std::isinf(depth[k]) && std::isinf(exact_depth[k]);
+      far_off += !both_inf && !(std::abs(depth[k] - exact_depth[k]) < 0.05f * exact_depth[k] + 0.05f);
+    }
+    EXPECT_LT(static_cast<double>(far_off) / depth.size(), 0.02) << "step " << step << ": linear depth";
+  }
+  const std::vector<uint8_t> still = render(*renderer_, moving, nullptr);  // still: full resolution
+  EXPECT_EQ(renderer_->stats().views_reduced, 3u);
+  const PictureDifference d = Compare(still, render(**exact, moving, nullptr));
+  EXPECT_LE(d.max, 3);
 }
 
 TEST_F(SceneTest, ViewCache_RebuildsExactlyWhenItsInputsChange) {

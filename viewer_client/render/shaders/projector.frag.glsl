@@ -44,6 +44,21 @@ uniform float u_weight_scale; // retained: fade^16 so newer snapshots win
 uniform sampler2DArray u_video;
 uniform sampler2DArrayShadow u_shadow;
 
+#ifdef COMBINED
+// Live projectors drawn in one full-screen pass (the renderer defines COMBINED and BATCH): the
+// point is reconstructed and its normal fetched once, then each of the u_count projectors below
+// is tested as the per-projector pass would, summed in the shader (last-wins: the last one that
+// reaches the pixel). Batches are added by blending (last-wins: a batch that reaches no
+// projector here discards, so earlier batches stay).
+uniform int u_count;
+uniform mat4 u_clips[BATCH];
+uniform mat4 u_shadow_clips[BATCH];
+uniform vec4 u_pinholes[BATCH];
+uniform vec4 u_distortions[BATCH];     // k1 k2 p1 p2
+uniform vec4 u_position_layers[BATCH];  // projector position (local), layer
+uniform vec4 u_extras[BATCH];           // shadow widen, k3, distorted (0 / 1), normal offset
+#endif
+
 layout(location = 0) out vec4 o_accum;
 layout(location = 1) out vec4 o_fade;
 
@@ -67,6 +82,56 @@ void InsertEntry(ivec2 pixel, vec4 entry) {
 }
 #endif
 
+// Where a surface point falls in a projector's image: false outside its frustum or image; ndc
+// (distortion applied) and `inside` (distance to the nearest image border, NDC) otherwise.
+bool ImagePoint(vec4 clip, vec4 pinhole, vec4 k1_k2_p1_p2, float k3, bool distorted, out vec2 ndc, out float inside) {
+  ndc = vec2(0.0);
+  inside = -1.0;
+  if (clip.w <= 0.0 || abs(clip.z) > clip.w) return false;
+  ndc = clip.xy * (1.0 / clip.w);
+  if (distorted) {
+    // Forward Brown-Conrady model on the normalised (OpenCV) coordinates of the undistorted ray.
+    vec2 x = vec2((ndc.x + pinhole.y) / pinhole.x, -(ndc.y + pinhole.w) / pinhole.z);
+    float r2 = dot(x, x);
+    float radial = 1.0 + r2 * (k1_k2_p1_p2.x + r2 * (k1_k2_p1_p2.y + r2 * k3));
+    float p1 = k1_k2_p1_p2.z, p2 = k1_k2_p1_p2.w;
+    vec2 xd = x * radial + vec2(2.0 * p1 * x.x * x.y + p2 * (r2 + 2.0 * x.x * x.x),
+                                p1 * (r2 + 2.0 * x.y * x.y) + 2.0 * p2 * x.x * x.y);
+    ndc = vec2(pinhole.x * xd.x - pinhole.y, -pinhole.z * xd.y - pinhole.w);
+  }
+  vec2 border = 1.0 - abs(ndc);
+  inside = min(border.x, border.y);
+  return inside >= 0.0;
+}
+
+// The projector's weight at a surface point (position, unit normal n) inside its image (clip, ndc,
+// inside from ImagePoint); 0 where the point faces away or is in shadow. u_weight_scale applies.
+float ProjectorWeight(vec3 position, vec3 n, vec4 clip, vec2 ndc, float inside, vec3 projector_position,
+                      mat4 shadow_clip_from_local, float shadow_widen, float normal_offset, float layer, float focal) {
+  vec3 to_projector = projector_position - position;
+  float distance_m = max(length(to_projector), 1e-6);
+  float inv_distance = 1.0 / distance_m;
+  float facing = dot(n, to_projector) * inv_distance;
+  if (facing <= 0.0) return 0.0;
+
+  // The shadow clip coordinate of position + n * distance_m * normal_offset.
+  vec4 clip_shadow = vec4(clip.xy * shadow_widen, clip.zw) +
+                     (distance_m * normal_offset) * (shadow_clip_from_local * vec4(n, 0.0));
+  vec3 ndc_shadow = clip_shadow.xyz * (1.0 / max(clip_shadow.w, 1e-6));
+  if (any(greaterThan(abs(ndc_shadow.xy), vec2(1.0)))) return 0.0;
+  float lit = texture(u_shadow, vec4(0.5 * ndc_shadow.xy + 0.5, layer, 0.5 * ndc_shadow.z + 0.5));
+  if (lit <= 0.0) return 0.0;
+  if (u_last_wins) return 1.0;
+  // Resolution: metres of surface per image pixel grow as distance / (focal * facing).
+  float resolution = focal / max(distance_m, 0.5);
+  float feather = u_feather > 0.0 ? smoothstep(0.0, u_feather, inside) : 1.0;
+  float w = max(facing * resolution * resolution * 100.0, 1e-8);
+  if (u_best_view) w = (w * w) * (w * w);
+  return w * max(feather, 1e-3) * u_weight_scale;
+}
+
+vec2 VideoUv(vec2 ndc) { return vec2(0.5 + 0.5 * ndc.x, 0.5 - 0.5 * ndc.y); }
+
 void main() {
   ivec2 pixel = ivec2(gl_FragCoord.xy);
   float depth = texelFetch(u_gbuffer_depth, pixel, 0).r;
@@ -77,50 +142,40 @@ void main() {
   vec4 local_h = u_local_from_window * window;
   float inv_w = 1.0 / local_h.w;
   vec3 position = local_h.xyz * inv_w;
-  vec4 clip = u_clip_from_local * vec4(position, 1.0);
-  if (clip.w <= 0.0 || abs(clip.z) > clip.w) discard;
-  vec2 ndc = clip.xy * (1.0 / clip.w);
-  if (u_distorted) {
-    // Forward Brown-Conrady model on the normalised (OpenCV) coordinates of the undistorted ray.
-    vec2 x = vec2((ndc.x + u_pinhole.y) / u_pinhole.x, -(ndc.y + u_pinhole.w) / u_pinhole.z);
-    float r2 = dot(x, x);
-    float radial = 1.0 + r2 * (u_k1_k2_p1_p2.x + r2 * (u_k1_k2_p1_p2.y + r2 * u_k3));
-    float p1 = u_k1_k2_p1_p2.z, p2 = u_k1_k2_p1_p2.w;
-    vec2 xd = x * radial + vec2(2.0 * p1 * x.x * x.y + p2 * (r2 + 2.0 * x.x * x.x),
-                                p1 * (r2 + 2.0 * x.y * x.y) + 2.0 * p2 * x.x * x.y);
-    ndc = vec2(u_pinhole.x * xd.x - u_pinhole.y, -u_pinhole.z * xd.y - u_pinhole.w);
+#ifdef COMBINED
+  vec4 packed_normal = texelFetch(u_gbuffer_normal, pixel, 0);
+  if (packed_normal.a == 0.0) discard;
+  vec3 n = normalize(2.0 * packed_normal.xyz - 1.0);
+  vec4 sum = vec4(0.0);
+  for (int k = 0; k < u_count; ++k) {
+    vec4 clip = u_clips[k] * vec4(position, 1.0);
+    vec2 ndc;
+    float inside;
+    vec4 extra = u_extras[k];  // shadow widen, k3, distorted, normal offset
+    if (!ImagePoint(clip, u_pinholes[k], u_distortions[k], extra.y, extra.z > 0.5, ndc, inside)) continue;
+    vec4 position_layer = u_position_layers[k];
+    float weight = ProjectorWeight(position, n, clip, ndc, inside, position_layer.xyz, u_shadow_clips[k], extra.x,
+                                   extra.w, position_layer.w, u_pinholes[k].x);
+    if (weight <= 0.0) continue;
+    vec3 video = texture(u_video, vec3(VideoUv(ndc), position_layer.w)).rgb;
+    sum = u_last_wins ? vec4(video, 1.0) : sum + vec4(weight * video, weight);
   }
-  vec2 border = 1.0 - abs(ndc);
-  float inside = min(border.x, border.y);
-  if (inside < 0.0) discard;
+  if (sum.a <= 0.0) discard;
+  o_accum = sum;
+  o_fade = vec4(0.0, 0.0, 0.0, 1.0);
+#else
+  vec4 clip = u_clip_from_local * vec4(position, 1.0);
+  vec2 ndc;
+  float inside;
+  if (!ImagePoint(clip, u_pinhole, u_k1_k2_p1_p2, u_k3, u_distorted, ndc, inside)) discard;
 
   vec4 packed_normal = texelFetch(u_gbuffer_normal, pixel, 0);
   if (packed_normal.a == 0.0) discard;
   vec3 n = normalize(2.0 * packed_normal.xyz - 1.0);
-  vec3 to_projector = u_projector_position - position;
-  float distance_m = max(length(to_projector), 1e-6);
-  float inv_distance = 1.0 / distance_m;
-  float facing = dot(n, to_projector) * inv_distance;
-  if (facing <= 0.0) discard;
-
-  // The shadow clip coordinate of position + n * distance_m * u_normal_offset.
-  vec4 clip_shadow = vec4(clip.xy * u_shadow_widen, clip.zw) +
-                     (distance_m * u_normal_offset) * (u_shadow_clip_from_local * vec4(n, 0.0));
-  vec3 ndc_shadow = clip_shadow.xyz * (1.0 / max(clip_shadow.w, 1e-6));
-  if (any(greaterThan(abs(ndc_shadow.xy), vec2(1.0)))) discard;
-  float lit = texture(u_shadow, vec4(0.5 * ndc_shadow.xy + 0.5, u_layer, 0.5 * ndc_shadow.z + 0.5));
-  if (lit <= 0.0) discard;
-
-  vec2 uv = vec2(0.5 + 0.5 * ndc.x, 0.5 - 0.5 * ndc.y);
-  float weight = 1.0;
-  if (!u_last_wins) {
-    // Resolution: metres of surface per image pixel grow as distance / (focal * facing).
-    float resolution = u_pinhole.x / max(distance_m, 0.5);
-    float feather = u_feather > 0.0 ? smoothstep(0.0, u_feather, inside) : 1.0;
-    float w = max(facing * resolution * resolution * 100.0, 1e-8);
-    if (u_best_view) w = (w * w) * (w * w);
-    weight = w * max(feather, 1e-3) * u_weight_scale;
-  }
+  float weight = ProjectorWeight(position, n, clip, ndc, inside, u_projector_position, u_shadow_clip_from_local,
+                                 u_shadow_widen, u_normal_offset, u_layer, u_pinhole.x);
+  if (weight <= 0.0) discard;
+  vec2 uv = VideoUv(ndc);
 #ifdef MAPPING
   // Last-wins ranks by list order (layer + 1), the others by weight; the cached resolve reads the
   // first entry only for last-wins.
@@ -129,5 +184,6 @@ void main() {
   vec3 video = texture(u_video, vec3(uv, u_layer)).rgb;
   o_accum = u_last_wins ? vec4(video, 1.0) : vec4(weight * video, weight);
   o_fade = vec4(weight * u_fade, 0.0, 0.0, 1.0);
+#endif
 #endif
 }

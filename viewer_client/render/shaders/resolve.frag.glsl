@@ -19,6 +19,10 @@ uniform bool u_tint_by_age;
 // Retained fade since the retained targets were drawn: the weighted mean fade of snapshots scales
 // by exactly 0.5^(elapsed / half-life), since every snapshot's fade does (1 when not cached).
 uniform float u_fade_scale;
+// A view drawn at reduced resolution (RendererOptions::moving_view_scale; never CACHED): its
+// targets hold the picture in the lower-left part of the viewport, scaled by u_source_scale.
+uniform vec2 u_source_origin;  // the viewport's lower-left corner (framebuffer pixels)
+uniform vec2 u_source_scale;
 #ifdef CACHED
 uniform sampler2DArray u_mapping;  // layers: entries, sorted by weight descending; w = 0: none
 uniform sampler2DArray u_video;
@@ -36,11 +40,14 @@ uniform sampler2D u_gbuffer_normal;
 uniform mat4 u_local_from_window;
 uniform sampler2DArrayShadow u_shadow;
 uniform mat4 u_shadow_clip_from_local[MAX_PROJECTORS];  // by layer
-uniform vec4 u_position_offset[MAX_PROJECTORS];         // projector position (local), normal offset
+// projector position (local), normal offset; offset < 0: no model in this projector's shadow map
+// (the cached entry already passed its static shadow test).
+uniform vec4 u_position_offset[MAX_PROJECTORS];
 
 bool Lit(float layer, vec3 position, vec3 n) {
   int l = int(layer + 0.5);
   vec4 po = u_position_offset[l];
+  if (po.w < 0.0) return true;
   float distance_m = max(length(po.xyz - position), 1e-6);
   vec4 clip = u_shadow_clip_from_local[l] * vec4(position + n * (distance_m * po.w), 1.0);
   vec3 ndc = clip.xyz * (1.0 / max(clip.w, 1e-6));
@@ -51,7 +58,11 @@ bool Lit(float layer, vec3 position, vec3 n) {
 out vec4 o_color;
 
 void main() {
+#ifdef CACHED
   ivec2 pixel = ivec2(gl_FragCoord.xy);
+#else
+  ivec2 pixel = ivec2(u_source_origin + floor((gl_FragCoord.xy - u_source_origin) * u_source_scale));
+#endif
   vec4 g = texelFetch(u_gbuffer_color, pixel, 0);
   float depth = texelFetch(u_gbuffer_depth, pixel, 0).r;
   gl_FragDepth = depth;
