@@ -1,8 +1,11 @@
 #include "viewer_client/client/overlay.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
+
+#include <epoxy/gl.h>
 
 #include <imgui.h>
 #include <backends/imgui_impl_opengl3.h>
@@ -11,6 +14,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "viewer_client/render/shader_program.h"
 
 namespace ave::viewer {
 namespace {
@@ -42,6 +46,88 @@ void Label(ImDrawList* dl, const Eigen::Vector2d& at, ImU32 color, const std::st
 }
 
 constexpr double kTimelineSpanS = 30;
+
+// Composites the cached overlay texture (colours premultiplied by coverage, as ImGui's blending
+// leaves them over a transparent target) over the tiles it covers. Tile corners are in pixels from
+// the top-left; the texture has the framebuffer's size and orientation.
+constexpr char kCompositeVert[] = R"glsl(#version 330 core
+layout(location = 0) in vec2 corner_px;
+uniform vec2 size_px;
+void main() { gl_Position = vec4(corner_px.x / size_px.x * 2.0 - 1.0, 1.0 - corner_px.y / size_px.y * 2.0, 0.0, 1.0); }
+)glsl";
+constexpr char kCompositeFrag[] = R"glsl(#version 330 core
+uniform sampler2D overlay;
+out vec4 color;
+void main() { color = texelFetch(overlay, ivec2(gl_FragCoord.xy), 0); }
+)glsl";
+
+constexpr int kTilePx = 32;
+
+// FNV-1a over ImGui's draw data: equal when the overlay would draw the same pixels.
+uint64_t DrawDataSignature(const ImDrawData& data) {
+  uint64_t h = 1469598103934665603ull;
+  auto mix = [&h](const void* bytes, size_t n) {
+    const auto* b = static_cast<const unsigned char*>(bytes);
+    for (size_t i = 0; i < n; ++i) h = (h ^ b[i]) * 1099511628211ull;
+  };
+  mix(&data.DisplaySize, sizeof data.DisplaySize);
+  for (int l = 0; l < data.CmdListsCount; ++l) {
+    const ImDrawList& list = *data.CmdLists[l];
+    mix(list.VtxBuffer.Data, size_t(list.VtxBuffer.Size) * sizeof(ImDrawVert));
+    mix(list.IdxBuffer.Data, size_t(list.IdxBuffer.Size) * sizeof(ImDrawIdx));
+    for (const ImDrawCmd& cmd : list.CmdBuffer) {
+      mix(&cmd.ClipRect, sizeof cmd.ClipRect);
+      mix(&cmd.TextureId, sizeof cmd.TextureId);
+      mix(&cmd.ElemCount, sizeof cmd.ElemCount);
+      mix(&cmd.IdxOffset, sizeof cmd.IdxOffset);
+      mix(&cmd.VtxOffset, sizeof cmd.VtxOffset);
+    }
+  }
+  return h;
+}
+
+// The 32-pixel tiles any of ImGui's triangles (within its clip rectangle) touches, as quads
+// (two triangles, pixel corners from the top-left), one per horizontal run of covered tiles.
+std::vector<float> CoveredTiles(const ImDrawData& data, int width, int height) {
+  const int tiles_x = (width + kTilePx - 1) / kTilePx, tiles_y = (height + kTilePx - 1) / kTilePx;
+  std::vector<uint8_t> covered(size_t(tiles_x) * tiles_y, 0);
+  for (int l = 0; l < data.CmdListsCount; ++l) {
+    const ImDrawList& list = *data.CmdLists[l];
+    for (const ImDrawCmd& cmd : list.CmdBuffer) {
+      if (cmd.UserCallback != nullptr) continue;
+      for (unsigned i = 0; i + 2 < cmd.ElemCount; i += 3) {
+        float x0 = cmd.ClipRect.z, y0 = cmd.ClipRect.w, x1 = cmd.ClipRect.x, y1 = cmd.ClipRect.y;
+        for (unsigned k = 0; k < 3; ++k) {
+          const ImVec2 p = list.VtxBuffer[cmd.VtxOffset + list.IdxBuffer[cmd.IdxOffset + i + k]].pos;
+          x0 = std::min(x0, p.x), y0 = std::min(y0, p.y), x1 = std::max(x1, p.x), y1 = std::max(y1, p.y);
+        }
+        x0 = std::max(x0, cmd.ClipRect.x), y0 = std::max(y0, cmd.ClipRect.y);
+        x1 = std::min(x1, cmd.ClipRect.z), y1 = std::min(y1, cmd.ClipRect.w);
+        if (!(x1 >= x0 && y1 >= y0)) continue;
+        const int tx0 = std::clamp(int(x0) / kTilePx, 0, tiles_x - 1), tx1 = std::clamp(int(x1) / kTilePx, 0, tiles_x - 1);
+        const int ty0 = std::clamp(int(y0) / kTilePx, 0, tiles_y - 1), ty1 = std::clamp(int(y1) / kTilePx, 0, tiles_y - 1);
+        for (int ty = ty0; ty <= ty1; ++ty)
+          for (int tx = tx0; tx <= tx1; ++tx) covered[size_t(ty) * tiles_x + tx] = 1;
+      }
+    }
+  }
+  std::vector<float> quads;
+  for (int ty = 0; ty < tiles_y; ++ty) {
+    for (int tx = 0; tx < tiles_x;) {
+      if (!covered[size_t(ty) * tiles_x + tx]) {
+        ++tx;
+        continue;
+      }
+      int end = tx;
+      while (end < tiles_x && covered[size_t(ty) * tiles_x + end]) ++end;
+      const float x0 = float(tx * kTilePx), x1 = float(std::min(end * kTilePx, width));
+      const float y0 = float(ty * kTilePx), y1 = float(std::min((ty + 1) * kTilePx, height));
+      quads.insert(quads.end(), {x0, y0, x1, y0, x1, y1, x0, y0, x1, y1, x0, y1});
+      tx = end;
+    }
+  }
+  return quads;
+}
 
 }  // namespace
 
@@ -87,17 +173,102 @@ std::pair<Eigen::Vector3d, Eigen::Vector3d> PixelRayOfView(const View& view, int
 struct Overlay::Impl {
   ImGuiContext* context = nullptr;
   bool backend = false;
+  OverlayOptions options;
+  // The cache: ImGui's pixels over a transparent target, and the tiles they cover.
+  GLuint framebuffer = 0, texture = 0, program = 0, vertex_array = 0, vertex_buffer = 0;
+  GLint size_uniform = -1;
+  int width = 0, height = 0;
+  bool valid = false;
+  uint64_t signature = 0, redraws = 0;
+  std::chrono::steady_clock::time_point drawn_at;
+  bool input = false;  // window input this frame (mouse moved, a button, wheel or typing)
+  Eigen::Vector2d last_cursor_px = Eigen::Vector2d(-1, -1);
+  GLsizei tile_vertices = 0;
+
   ~Impl() {
+    if (framebuffer != 0) glDeleteFramebuffers(1, &framebuffer);
+    if (texture != 0) glDeleteTextures(1, &texture);
+    if (vertex_buffer != 0) glDeleteBuffers(1, &vertex_buffer);
+    if (vertex_array != 0) glDeleteVertexArrays(1, &vertex_array);
+    if (program != 0) glDeleteProgram(program);
     if (context == nullptr) return;
     ImGui::SetCurrentContext(context);
     if (backend) ImGui_ImplOpenGL3_Shutdown();
     ImGui::DestroyContext(context);
   }
+
+  // Rasterises `data` into the cache texture (resized to width x height) and records its tiles.
+  void Redraw(ImDrawData* data, int w, int h) {
+    if (w != width || h != height) {
+      glBindTexture(GL_TEXTURE_2D, texture);
+      glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, w, h, 0, GL_RGBA, GL_UNSIGNED_BYTE, nullptr);
+      glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+      glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+      glBindFramebuffer(GL_FRAMEBUFFER, framebuffer);
+      glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, texture, 0);
+      width = w;
+      height = h;
+    }
+    glBindFramebuffer(GL_FRAMEBUFFER, framebuffer);
+    glDisable(GL_SCISSOR_TEST);
+    GLfloat clear[4];
+    glGetFloatv(GL_COLOR_CLEAR_VALUE, clear);
+    glClearColor(0, 0, 0, 0);
+    glClear(GL_COLOR_BUFFER_BIT);
+    glClearColor(clear[0], clear[1], clear[2], clear[3]);
+    ImGui_ImplOpenGL3_RenderDrawData(data);
+    const std::vector<float> tiles = CoveredTiles(*data, w, h);
+    glBindBuffer(GL_ARRAY_BUFFER, vertex_buffer);
+    glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(tiles.size() * sizeof(float)), tiles.data(), GL_STATIC_DRAW);
+    tile_vertices = GLsizei(tiles.size() / 2);
+    ++redraws;
+  }
+
+  // Blends the cache texture over the covered tiles of the bound framebuffer.
+  void Composite() {
+    if (tile_vertices == 0) return;
+    glViewport(0, 0, width, height);
+    glDisable(GL_SCISSOR_TEST);
+    glDisable(GL_DEPTH_TEST);
+    glDisable(GL_CULL_FACE);
+    glEnable(GL_BLEND);
+    glBlendEquation(GL_FUNC_ADD);
+    glBlendFunc(GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
+    glUseProgram(program);
+    glUniform2f(size_uniform, float(width), float(height));
+    glActiveTexture(GL_TEXTURE0);
+    glBindTexture(GL_TEXTURE_2D, texture);
+    glBindVertexArray(vertex_array);
+    glDrawArrays(GL_TRIANGLES, 0, tile_vertices);
+    glBindVertexArray(0);
+    glUseProgram(0);
+    glDisable(GL_BLEND);
+  }
 };
 
-absl::StatusOr<std::unique_ptr<Overlay>> Overlay::Create() {
+absl::StatusOr<std::unique_ptr<Overlay>> Overlay::Create(const OverlayOptions& options) {
+  if (!(options.content_refresh_hz >= 0)) return absl::InvalidArgumentError("overlay: content_refresh_hz must be >= 0");
   std::unique_ptr<Overlay> overlay(new Overlay());
   overlay->impl_ = std::make_unique<Impl>();
+  Impl& impl = *overlay->impl_;
+  impl.options = options;
+  absl::StatusOr<unsigned int> program =
+      internal::BuildProgram("overlay composite (vertex)", kCompositeVert, "overlay composite (fragment)", kCompositeFrag);
+  if (!program.ok()) return program.status();
+  impl.program = *program;
+  impl.size_uniform = glGetUniformLocation(impl.program, "size_px");
+  glUseProgram(impl.program);
+  glUniform1i(glGetUniformLocation(impl.program, "overlay"), 0);
+  glUseProgram(0);
+  glGenFramebuffers(1, &impl.framebuffer);
+  glGenTextures(1, &impl.texture);
+  glGenBuffers(1, &impl.vertex_buffer);
+  glGenVertexArrays(1, &impl.vertex_array);
+  glBindVertexArray(impl.vertex_array);
+  glBindBuffer(GL_ARRAY_BUFFER, impl.vertex_buffer);
+  glEnableVertexAttribArray(0);
+  glVertexAttribPointer(0, 2, GL_FLOAT, GL_FALSE, 2 * sizeof(float), nullptr);
+  glBindVertexArray(0);
   overlay->impl_->context = ImGui::CreateContext();
   ImGui::SetCurrentContext(overlay->impl_->context);
   ImGuiIO& io = ImGui::GetIO();
@@ -126,7 +297,12 @@ void Overlay::BeginFrame(int framebuffer_width, int framebuffer_height, const Wi
     io.MouseDown[1] = input->right_down;
     io.MouseWheel = static_cast<float>(input->scroll);
     for (char c : input->typed) io.AddInputCharacter(static_cast<unsigned>(c));
+    impl_->input = input->cursor_px != impl_->last_cursor_px || input->left_down || input->right_down ||
+                   input->middle_down || input->left_presses > 0 || input->middle_presses > 0 ||
+                   input->scroll != 0 || !input->typed.empty();
+    impl_->last_cursor_px = input->cursor_px;
   } else {
+    impl_->input = false;
     io.MousePos = ImVec2(-FLT_MAX, -FLT_MAX);
     io.MouseDown[0] = io.MouseDown[1] = false;
   }
@@ -249,11 +425,38 @@ void Overlay::Annotate(const View& view, int framebuffer_height, const std::vect
   dl->PopClipRect();
 }
 
-void Overlay::EndFrame() {
+void Overlay::EndFrame(bool views_moved) {
   ImGui::SetCurrentContext(impl_->context);
   ImGui::Render();
-  ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+  ImDrawData* data = ImGui::GetDrawData();
+  Impl& impl = *impl_;
+  const int w = static_cast<int>(data->DisplaySize.x), h = static_cast<int>(data->DisplaySize.y);
+  if (w <= 0 || h <= 0) return;
+  const uint64_t signature = DrawDataSignature(*data);
+  const auto now = std::chrono::steady_clock::now();
+  const bool due = impl.options.content_refresh_hz <= 0 ||
+                   now - impl.drawn_at >= std::chrono::duration<double>(1 / impl.options.content_refresh_hz);
+  const bool redraw = !impl.valid || w != impl.width || h != impl.height ||
+                      (signature != impl.signature && (views_moved || impl.input || due));
+  GLint framebuffer = 0, viewport[4];
+  glGetIntegerv(GL_DRAW_FRAMEBUFFER_BINDING, &framebuffer);
+  glGetIntegerv(GL_VIEWPORT, viewport);
+  const GLenum kept[] = {GL_BLEND, GL_SCISSOR_TEST, GL_DEPTH_TEST, GL_CULL_FACE};
+  GLboolean enabled[std::size(kept)];
+  for (size_t i = 0; i < std::size(kept); ++i) enabled[i] = glIsEnabled(kept[i]);
+  if (redraw) {
+    impl.Redraw(data, w, h);
+    impl.valid = true;
+    impl.signature = signature;
+    impl.drawn_at = now;
+    glBindFramebuffer(GL_FRAMEBUFFER, framebuffer);
+  }
+  impl.Composite();
+  glViewport(viewport[0], viewport[1], viewport[2], viewport[3]);
+  for (size_t i = 0; i < std::size(kept); ++i) (enabled[i] ? glEnable : glDisable)(kept[i]);
 }
+
+uint64_t Overlay::redraws() const { return impl_->redraws; }
 
 void Overlay::DiscardFrame() {
   ImGui::SetCurrentContext(impl_->context);

@@ -55,10 +55,20 @@ std::string PickCamera(const View& view, int framebuffer_height, const std::vect
 std::pair<Eigen::Vector3d, Eigen::Vector3d> PixelRayOfView(const View& view, int framebuffer_height,
                                                            const Eigen::Vector2d& cursor_px);
 
+// How often the overlay's pixels are redrawn (issue 7 performance). ImGui's triangles are
+// rasterised into a cached RGBA texture that is composited over the views every frame (one
+// textured pass over the 32-pixel tiles the overlay covers); the texture is redrawn only when the
+// overlay's triangles changed, and then at once on window input, when the views moved (labels
+// follow the scene), on a size change, or when 1 / content_refresh_hz has passed since the last
+// redraw (the frame rate, byte rate and time line tick at that rate).
+struct OverlayOptions {
+  double content_refresh_hz = 0;  // 0: redraw on every change
+};
+
 class Overlay {
  public:
   // Needs the current GL context (it compiles ImGui's GL 3.3 shaders and uploads the font).
-  static absl::StatusOr<std::unique_ptr<Overlay>> Create();
+  static absl::StatusOr<std::unique_ptr<Overlay>> Create(const OverlayOptions& options = {});
   ~Overlay();
   Overlay(const Overlay&) = delete;
   Overlay& operator=(const Overlay&) = delete;
@@ -72,8 +82,11 @@ class Overlay {
   // Camera names, object ids and paths in one view.
   void Annotate(const View& view, int framebuffer_height, const std::vector<CameraView>& cameras,
                 const std::vector<ObjectView>& objects, const OverlayState& state);
-  // Draws everything into the currently bound framebuffer.
-  void EndFrame();
+  // Draws everything into the currently bound framebuffer (from the cache when it may).
+  // `views_moved`: a view's pose or projection changed since the last frame.
+  void EndFrame(bool views_moved = false);
+  // Times the overlay's texture was redrawn (the rest of EndFrame calls composited the cache).
+  uint64_t redraws() const;
   // Headless: builds one frame and throws it away so auto-sized windows have their size.
   void DiscardFrame();
 

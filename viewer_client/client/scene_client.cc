@@ -54,6 +54,38 @@ bool ViewsDifferALot(const SelectionViews& a, const SelectionViews& b, double fr
   return false;
 }
 
+int JpegReduction(int frame_width, int frame_height, int need_width, int need_height) {
+  if (need_width <= 0 || need_height <= 0 || frame_width <= 0 || frame_height <= 0) return 1;
+  int reduction = 1;
+  while (reduction < 8 && frame_width / (2 * reduction) >= need_width && frame_height / (2 * reduction) >= need_height) {
+    reduction *= 2;
+  }
+  return reduction;
+}
+
+std::shared_ptr<const DecodedImage> DecodeJpeg(const std::string& jpeg, int reduction) {
+  if (jpeg.empty()) return nullptr;
+  const int flag = reduction >= 8 ? cv::IMREAD_REDUCED_COLOR_8
+                 : reduction >= 4 ? cv::IMREAD_REDUCED_COLOR_4
+                 : reduction >= 2 ? cv::IMREAD_REDUCED_COLOR_2
+                                  : cv::IMREAD_COLOR;
+  const cv::Mat bytes(1, static_cast<int>(jpeg.size()), CV_8UC1, const_cast<char*>(jpeg.data()));
+  cv::Mat bgr;
+  try {
+    bgr = cv::imdecode(bytes, flag);
+  } catch (const cv::Exception&) {
+    return nullptr;
+  }
+  if (bgr.empty()) return nullptr;
+  auto image = std::make_shared<DecodedImage>();
+  image->width = bgr.cols;
+  image->height = bgr.rows;
+  image->rgba.resize(size_t(bgr.cols) * bgr.rows * 4);
+  cv::Mat rgba(bgr.rows, bgr.cols, CV_8UC4, image->rgba.data());
+  cv::cvtColor(bgr, rgba, cv::COLOR_BGR2RGBA);
+  return image;
+}
+
 SceneClient::SceneClient(std::shared_ptr<grpc::Channel> channel, std::string viewer_token, std::string viewer_id)
     : channel_(std::move(channel)), token_(std::move(viewer_token)), viewer_id_(std::move(viewer_id)) {}
 
@@ -124,7 +156,27 @@ void SceneClient::Stop() {
 }
 
 std::vector<CameraView> SceneClient::Snapshot() const {
+  std::map<std::string, PendingJpeg> pending;
+  {
+    std::lock_guard lock(mu_);
+    pending = pending_;
+  }
+  std::map<std::string, std::shared_ptr<const DecodedImage>> decoded;
+  for (const auto& [id, p] : pending) {  // decode outside the lock
+    decoded[id] = DecodeJpeg(*p.bytes, p.reduction);
+    ++jpegs_decoded_;
+    if (!decoded[id]) AVE_LOG(WARNING) << "camera '" << id << "': undecodable JPEG (frame " << p.frame_sequence << ")";
+  }
   std::lock_guard lock(mu_);
+  for (auto& [id, image] : decoded) {
+    auto it = pending_.find(id);
+    if (it == pending_.end() || it->second.bytes != pending.at(id).bytes) continue;  // taken, or a newer one came
+    pending_.erase(it);
+    auto cam = cameras_.find(id);
+    if (image == nullptr || cam == cameras_.end()) continue;  // an undecodable frame keeps the previous image
+    cam->second.image = std::move(image);
+    cam->second.image_serial = next_serial_++;
+  }
   std::vector<CameraView> out;
   for (const auto& [id, cam] : cameras_) out.push_back(cam);
   return out;
@@ -207,27 +259,13 @@ void SceneClient::Loop(SubscribeOptions options) {
         break;
       }
       backoff = std::chrono::milliseconds(200);
-      std::map<std::string, std::shared_ptr<const DecodedImage>> decoded;
-      for (const auto& cam : update.cameras()) {  // decode outside the lock
-        if (cam.jpeg().empty()) continue;
-        const cv::Mat bytes(1, static_cast<int>(cam.jpeg().size()), CV_8UC1, const_cast<char*>(cam.jpeg().data()));
-        cv::Mat bgr = cv::imdecode(bytes, cv::IMREAD_COLOR);
-        if (bgr.empty()) {
-          AVE_LOG(WARNING) << "camera '" << cam.camera_id() << "': undecodable JPEG (frame " << cam.frame_sequence() << ")";
-          continue;
-        }
-        auto image = std::make_shared<DecodedImage>();
-        image->width = bgr.cols;
-        image->height = bgr.rows;
-        image->rgba.resize(size_t(bgr.cols) * bgr.rows * 4);
-        cv::Mat rgba(bgr.rows, bgr.cols, CV_8UC4, image->rgba.data());
-        cv::cvtColor(bgr, rgba, cv::COLOR_BGR2RGBA);
-        decoded[cam.camera_id()] = std::move(image);
-      }
       {
         std::lock_guard lock(mu_);
-        for (const auto& id : update.removed_camera_ids()) cameras_.erase(id);
-        for (const auto& cam : update.cameras()) {
+        for (const auto& id : update.removed_camera_ids()) {
+          cameras_.erase(id);
+          pending_.erase(id);
+        }
+        for (auto& cam : *update.mutable_cameras()) {
           CameraView& v = cameras_[cam.camera_id()];
           v.id = cam.camera_id();
           v.name = cam.name();
@@ -240,14 +278,15 @@ void SceneClient::Loop(SubscribeOptions options) {
           v.status = FromProto(cam.status());
           v.frame_capture_time_ns = cam.frame_capture_time_ns();
           v.frame_sequence = cam.frame_sequence();
-          if (auto it = decoded.find(cam.camera_id()); it != decoded.end()) {
-            v.image = it->second;
-            v.image_serial = next_serial_++;
+          if (!cam.jpeg().empty()) {
+            const int reduction = JpegReduction(v.intrinsics.width, v.intrinsics.height, options.decode_width,
+                                                options.decode_height);
             ++v.jpegs_received;
             v.jpeg_bytes_received += cam.jpeg().size();
             jpeg_bytes_ += cam.jpeg().size();
             v.recent_frame_times_ns.push_back(update.server_time_ns());
             if (v.recent_frame_times_ns.size() > kTimelineFrames) v.recent_frame_times_ns.erase(v.recent_frame_times_ns.begin());
+            pending_[v.id] = {std::make_shared<const std::string>(std::move(*cam.mutable_jpeg())), v.frame_sequence, reduction};
           }
         }
         objects_.clear();

@@ -86,7 +86,18 @@ struct SubscribeOptions {
   uint32_t max_jpeg_width = 0;  // hint to the server, 0 = any
   // Data selection: re-subscribe with new views at most this often (SetViews).
   std::chrono::milliseconds reselect_interval{500};
+  // The image size the renderer resamples frames to (its video layer; 0 = keep full size): a
+  // frame at least twice as large is decoded at 1/2, 1/4 or 1/8 scale by the JPEG decoder, never
+  // below this size.
+  int decode_width = 0, decode_height = 0;
 };
+
+// The JPEG scale divisor (1, 2, 4 or 8) that keeps a frame_width x frame_height frame at least
+// need_width x need_height; 1 when either need is 0 or the frame size is unknown.
+int JpegReduction(int frame_width, int frame_height, int need_width, int need_height);
+
+// Decodes a JPEG at 1/`reduction` scale into RGBA; null when the bytes are not a JPEG OpenCV reads.
+std::shared_ptr<const DecodedImage> DecodeJpeg(const std::string& jpeg, int reduction = 1);
 
 class SceneClient {
  public:
@@ -100,11 +111,14 @@ class SceneClient {
   void Start(const SubscribeOptions& options);
   void Stop();
 
+  // The cameras as last received. Frames are decoded here, not on arrival, and only each camera's
+  // newest: a frame superseded before anyone asked for it is never decoded (issue 7 performance).
   std::vector<CameraView> Snapshot() const;
   std::vector<ObjectView> Objects() const;
   uint64_t updates_received() const { return updates_.load(); }
   uint64_t jpeg_bytes_received() const { return jpeg_bytes_.load(); }
   uint64_t subscriptions() const { return subscriptions_.load(); }  // Subscribe calls made (re-subscribes count)
+  uint64_t jpegs_decoded() const { return jpegs_decoded_.load(); }
 
   // Data selection: the views the viewer draws now, in the local frame of the static model (its
   // origin goes with them once FetchStaticModel ran; before, the server's own local frame). The
@@ -130,7 +144,16 @@ class SceneClient {
   std::string viewer_id_;
   mutable std::mutex mu_;
   std::condition_variable changed_;
-  std::map<std::string, CameraView> cameras_;
+  // The newest undecoded JPEG of a camera and the scale to decode it at.
+  struct PendingJpeg {
+    std::shared_ptr<const std::string> bytes;
+    uint64_t frame_sequence = 0;
+    int reduction = 1;
+  };
+  // Mutable: Snapshot() decodes pending frames into the cameras it returns.
+  mutable std::map<std::string, CameraView> cameras_;
+  mutable std::map<std::string, PendingJpeg> pending_;
+  mutable std::atomic<uint64_t> jpegs_decoded_{0};
   std::vector<ObjectView> objects_;
   SelectionViews wanted_views_, subscribed_views_;
   std::chrono::steady_clock::time_point last_subscribe_{};
@@ -144,7 +167,7 @@ class SceneClient {
   std::atomic<bool> stop_{false};
   std::shared_ptr<void> context_;  // the live grpc::ClientContext, so Stop() can cancel it
   std::thread thread_;
-  uint64_t next_serial_ = 1;
+  mutable uint64_t next_serial_ = 1;
 };
 
 }  // namespace ave::viewer

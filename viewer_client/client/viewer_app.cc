@@ -8,6 +8,8 @@
 #include <set>
 #include <thread>
 
+#include <sys/resource.h>
+
 #include <grpcpp/grpcpp.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -189,7 +191,9 @@ class Session {
     const std::vector<View> first = ComputeViews({}, w, h);
     UpdateSelection(first);
     for (auto& c : clients_) {
-      c->Start({.camera_ids = options_.camera_filter, .max_rate_hz = options_.max_rate_hz, .include_jpeg = true});
+      c->Start({.camera_ids = options_.camera_filter, .max_rate_hz = options_.max_rate_hz, .include_jpeg = true,
+                .decode_width = renderer_.options().video_layer_width,
+                .decode_height = renderer_.options().video_layer_height});
     }
     return absl::OkStatus();
   }
@@ -253,8 +257,9 @@ class Session {
     for (auto& c : clients_) c->SetViews(selection);
   }
 
-  // Draws one frame into the context's framebuffer; returns the views drawn.
-  absl::StatusOr<std::vector<View>> Draw(const WindowInput* input) {
+  // Draws one frame into the context's framebuffer; returns the views drawn. `saved`: the frame
+  // goes to a PNG, so the overlay is redrawn if its content changed (no 4 Hz lag in pictures).
+  absl::StatusOr<std::vector<View>> Draw(const WindowInput* input, bool saved = false) {
     const auto now = std::chrono::steady_clock::now();
     const double dt = std::chrono::duration<double>(now - last_frame_).count();
     last_frame_ = now;
@@ -303,8 +308,9 @@ class Session {
         if (b + 1 < builds) overlay_->DiscardFrame();
       }
       context_.BindFramebuffer();
-      overlay_->EndFrame();
+      overlay_->EndFrame(saved || ViewsMoved(views));
     }
+    last_views_ = views;
     UpdateSelection(views);
     ++frames_;
     return views;
@@ -349,6 +355,11 @@ class Session {
   }
 
   int frames() const { return frames_; }
+  uint64_t jpegs_decoded() const {
+    uint64_t n = 0;
+    for (const auto& c : clients_) n += c->jpegs_decoded();
+    return n;
+  }
   SceneClient& client(size_t i) { return *clients_[i]; }
 
  private:
@@ -381,6 +392,19 @@ class Session {
     return s;
   }
 
+  // Whether a view's pose, projection or viewport differs from the last frame's (labels move).
+  bool ViewsMoved(const std::vector<View>& views) const {
+    if (views.size() != last_views_.size()) return true;
+    for (size_t i = 0; i < views.size(); ++i) {
+      const View &a = views[i], &b = last_views_[i];
+      if (a.view != b.view || a.projection != b.projection || a.viewport.x != b.viewport.x ||
+          a.viewport.y != b.viewport.y || a.viewport.width != b.viewport.width || a.viewport.height != b.viewport.height) {
+        return true;
+      }
+    }
+    return false;
+  }
+
   void PickPivot(const View& browse, const Eigen::Vector2d& cursor_px) {
     if (!bvh_) bvh_ = std::make_unique<MeshBvh>(mesh_);
     const auto [origin, dir] = PixelRayOfView(browse, context_.framebuffer_height(), cursor_px);
@@ -397,6 +421,7 @@ class Session {
   std::optional<DisplayOptions> applied_display_;
   std::vector<std::unique_ptr<SceneClient>> clients_;
   std::vector<Projector> projectors_;
+  std::vector<View> last_views_;  // the previous frame's, for the overlay cache
   TriangleMesh mesh_;
   std::unique_ptr<MeshBvh> bvh_;
   std::chrono::steady_clock::time_point last_frame_ = std::chrono::steady_clock::now();
@@ -407,6 +432,14 @@ class Session {
   std::map<std::string, std::pair<uint64_t, std::chrono::steady_clock::time_point>> last_jpegs_;
   int frames_ = 0;
 };
+
+// CPU seconds of the whole process (every thread: llvmpipe's, the subscription's), for the
+// headless frame-time log line.
+double ProcessCpuSeconds() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return double(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) + 1e-6 * double(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
+}
 
 // Writes the framebuffer to `path` as PNG.
 absl::Status SaveFramebuffer(GlContext& context, const std::string& path) {
@@ -448,11 +481,15 @@ absl::Status RunViewer(const ViewerOptions& options) {
   }
   if (absl::Status s = context->MakeCurrent(); !s.ok()) return s;
   AVE_LOG(INFO) << "viewer: " << context->Description();
-  auto renderer = Renderer::Create();
+  RendererOptions renderer_options;
+  // A recording keeps every frame at full resolution, also while a view moves.
+  if (!options.record_dir.empty()) renderer_options.moving_view_scale = 1;
+  auto renderer = Renderer::Create(renderer_options);
   if (!renderer.ok()) return renderer.status();
   std::unique_ptr<Overlay> overlay;
   if (options.panel) {
-    auto o = Overlay::Create();
+    // The time line and rates refresh at 4 Hz; input and moving views redraw the overlay at once.
+    auto o = Overlay::Create({.content_refresh_hz = 4});
     if (o.ok()) {
       overlay = *std::move(o);
     } else {  // the views still work without the panel
@@ -496,9 +533,15 @@ absl::Status RunViewer(const ViewerOptions& options) {
     const int frames = std::max(1, options.max_frames);
     std::vector<View> views;
     double draw_s = 0;  // frames after the first (which compiles shaders and renders every shadow map)
+    double cpu_at_second_frame = 0;
+    uint64_t decoded_at_second_frame = 0;
     for (int f = 0; f < frames; ++f) {
+      if (f == 1) {
+        cpu_at_second_frame = ProcessCpuSeconds();
+        decoded_at_second_frame = session.jpegs_decoded();
+      }
       const auto frame_start = std::chrono::steady_clock::now();
-      absl::StatusOr<std::vector<View>> drawn = session.Draw(nullptr);
+      absl::StatusOr<std::vector<View>> drawn = session.Draw(nullptr, f + 1 == frames || !options.record_dir.empty());
       if (!drawn.ok()) return drawn.status();
       views = *std::move(drawn);
       (void)context->ReadPixels();  // waits for the GPU, so the time is the frame's
@@ -508,7 +551,10 @@ absl::Status RunViewer(const ViewerOptions& options) {
     }
     if (frames > 1) {
       AVE_LOG(INFO) << "viewer: " << frames - 1 << " frames after the first in " << draw_s << " s ("
-                    << 1e3 * draw_s / (frames - 1) << " ms per frame, read-back included); renderer: "
+                    << 1e3 * draw_s / (frames - 1) << " ms per frame, read-back included; "
+                    << 1e3 * (ProcessCpuSeconds() - cpu_at_second_frame) / (frames - 1) << " CPU ms per frame, "
+                    << session.jpegs_decoded() - decoded_at_second_frame << " JPEG decodes, "
+                    << (overlay ? overlay->redraws() : 0) << " overlay redraws); renderer: "
                     << (*renderer)->stats().shadow_map_renders << " shadow-map renders, "
                     << (*renderer)->stats().dynamic_shadow_updates << " dynamic shadow updates, "
                     << (*renderer)->stats().video_uploads << " video uploads, view cache: "
@@ -532,7 +578,7 @@ absl::Status RunViewer(const ViewerOptions& options) {
       const WindowInput in = window->TakeInput();
       if (in.escape_pressed) window->RequestClose();
       session.HandleInput(in, views);
-      absl::StatusOr<std::vector<View>> drawn = session.Draw(&in);
+      absl::StatusOr<std::vector<View>> drawn = session.Draw(&in, !options.record_dir.empty() || in.typed.find('p') != std::string::npos);
       if (!drawn.ok()) return drawn.status();
       views = *std::move(drawn);
       if (absl::Status s = after_frame(); !s.ok()) return s;
@@ -542,7 +588,7 @@ absl::Status RunViewer(const ViewerOptions& options) {
       window->SwapBuffers();
     }
     if (!options.snapshot_path.empty()) {
-      if (session.Draw(nullptr).ok()) (void)SaveFramebuffer(*context, options.snapshot_path);
+      if (session.Draw(nullptr, true).ok()) (void)SaveFramebuffer(*context, options.snapshot_path);
     }
   }
   session.Stop();

@@ -2,6 +2,8 @@
 // projection of annotations, and when a view change is worth a new subscription.
 #include <epoxy/gl.h>
 #include <gtest/gtest.h>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "model_store/geometry/camera.h"
 #include "viewer_client/client/browse_camera.h"
@@ -23,7 +25,7 @@ Eigen::Vector2d PivotNdc(const BrowseCamera& cam) {
 TEST(BrowseCamera, OrbitKeepsThePivotCentredAndItsDistance) {
   BrowseCamera cam({-50, -60, 40}, {10, 5, 0});
   const double r = (cam.eye() - cam.pivot()).norm();
-  for (const Eigen::Vector2d drag : {Eigen::Vector2d(120, 0), Eigen::Vector2d(0, 60), Eigen::Vector2d(-300, -200)}) {
+  for (const Eigen::Vector2d& drag : {Eigen::Vector2d(120, 0), Eigen::Vector2d(0, 60), Eigen::Vector2d(-300, -200)}) {
     cam.Apply({.orbit_px = drag});
     EXPECT_NEAR((cam.eye() - cam.pivot()).norm(), r, 1e-9 * r);
     EXPECT_LT(PivotNdc(cam).norm(), 1e-6) << "drag " << drag.transpose();
@@ -139,6 +141,90 @@ TEST(Overlay, PanelAndLabelsAppearHeadless) {
   const int lx = int(label_at->x()), ly = int(label_at->y());
   EXPECT_GT(differs(lx + 6, ly - 16, lx + 40, ly), 100) << "no label right above the camera marker";
   EXPECT_EQ(differs(kW - 60, kH - 40, kW, kH), 0) << "the overlay drew where nothing belongs";
+}
+
+// Issue 7 performance: the overlay is redrawn into its cache only when its triangles changed, and
+// then at once on input or moving views, otherwise at most at content_refresh_hz; a cached frame
+// composites the same pixels.
+TEST(Overlay, CacheRedrawsOnInputMovingViewsAndDueContentChangesOnly) {
+  constexpr int kW = 480, kH = 320;
+  auto context = CreateHeadlessContext(kW, kH);
+  ASSERT_TRUE(context.ok()) << context.status();
+  ASSERT_TRUE((*context)->MakeCurrent().ok());
+  EXPECT_FALSE(Overlay::Create({.content_refresh_hz = -1}).ok());
+  auto overlay = Overlay::Create({.content_refresh_hz = 1e-3});  // content alone never redraws here
+  ASSERT_TRUE(overlay.ok()) << overlay.status();
+  CameraView cam;
+  cam.id = "camA";
+  cam.status = CameraLiveness::kLive;
+  OverlayState state;
+  auto draw = [&](double fps, const WindowInput* input, bool views_moved) {
+    (*context)->BindFramebuffer();
+    glViewport(0, 0, kW, kH);
+    glClearColor(0.2f, 0.3f, 0.4f, 1);
+    glClear(GL_COLOR_BUFFER_BIT);
+    (*overlay)->BeginFrame(kW, kH, input, 1.0 / 30);
+    (*overlay)->Panel({cam}, {.fps = fps}, 0, state);
+    (*overlay)->EndFrame(views_moved);
+    return *(*context)->ReadPixels();
+  };
+  draw(10, nullptr, false);  // auto-sizing frame
+  const uint64_t first = (*overlay)->redraws();
+  EXPECT_GE(first, 1u);
+  const std::vector<uint8_t> drawn = draw(10, nullptr, false);
+  const uint64_t after_same = (*overlay)->redraws();
+  const std::vector<uint8_t> cached = draw(10, nullptr, false);
+  EXPECT_EQ((*overlay)->redraws(), after_same) << "unchanged content was redrawn";
+  EXPECT_EQ(cached, drawn) << "the cached overlay composites other pixels than it drew";
+  draw(25, nullptr, false);
+  EXPECT_EQ((*overlay)->redraws(), after_same) << "a content change redrew before content_refresh_hz allowed";
+  draw(26, nullptr, true);
+  EXPECT_EQ((*overlay)->redraws(), after_same + 1) << "moving views did not redraw";
+  WindowInput input;
+  input.cursor_px = {300, 200};
+  draw(27, &input, false);
+  EXPECT_EQ((*overlay)->redraws(), after_same + 2) << "input did not redraw";
+  draw(27, &input, false);  // same cursor, same content
+  EXPECT_EQ((*overlay)->redraws(), after_same + 2);
+  auto every_change = Overlay::Create();  // default: every change redraws
+  ASSERT_TRUE(every_change.ok());
+  for (double fps : {10.0, 11.0, 11.0}) {
+    (*every_change)->BeginFrame(kW, kH, nullptr, 1.0 / 30);
+    (*every_change)->Panel({cam}, {.fps = fps}, 0, state);
+    (*every_change)->EndFrame();
+  }
+  EXPECT_EQ((*every_change)->redraws(), 2u);
+}
+
+TEST(JpegDecode, ReducesOnlyWhileTheLayerSizeIsKept) {
+  EXPECT_EQ(JpegReduction(640, 480, 640, 480), 1);
+  EXPECT_EQ(JpegReduction(1279, 960, 640, 480), 1);
+  EXPECT_EQ(JpegReduction(1280, 960, 640, 480), 2);
+  EXPECT_EQ(JpegReduction(1920, 1080, 640, 480), 2);
+  EXPECT_EQ(JpegReduction(2560, 1920, 640, 480), 4);
+  EXPECT_EQ(JpegReduction(20000, 15000, 640, 480), 8);
+  EXPECT_EQ(JpegReduction(1280, 960, 0, 0), 1);
+  EXPECT_EQ(JpegReduction(0, 0, 640, 480), 1);
+}
+
+TEST(JpegDecode, DecodesRgbaAtTheReducedSizeAndRefusesGarbage) {
+  cv::Mat bgr(96, 128, CV_8UC3, cv::Scalar(30, 60, 220));  // BGR: red dominant
+  std::vector<uint8_t> bytes;
+  ASSERT_TRUE(cv::imencode(".jpg", bgr, bytes));
+  const std::string jpeg(bytes.begin(), bytes.end());
+  for (int reduction : {1, 2, 4}) {
+    const auto image = DecodeJpeg(jpeg, reduction);
+    ASSERT_NE(image, nullptr);
+    EXPECT_EQ(image->width, 128 / reduction);
+    EXPECT_EQ(image->height, 96 / reduction);
+    ASSERT_EQ(image->rgba.size(), size_t(image->width) * image->height * 4);
+    EXPECT_NEAR(image->rgba[0], 220, 6);
+    EXPECT_NEAR(image->rgba[1], 60, 6);
+    EXPECT_NEAR(image->rgba[2], 30, 6);
+    EXPECT_EQ(image->rgba[3], 255);
+  }
+  EXPECT_EQ(DecodeJpeg("not a jpeg"), nullptr);
+  EXPECT_EQ(DecodeJpeg(""), nullptr);
 }
 
 TEST(DataSelection, SmallMovesKeepTheSubscriptionLargeOnesRenewIt) {
