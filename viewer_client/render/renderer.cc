@@ -91,20 +91,13 @@ void ApplyPassState(Pass pass, bool blend = false) {
       // Back faces of the frustum volume cover every pixel whose view ray meets the volume exactly
       // once, with the eye inside or outside it; depth clamping keeps far faces beyond the view's
       // far plane.
-      glEnable(GL_SCISSOR_TEST);
-      glDisable(GL_DEPTH_TEST);
-      glDepthMask(GL_FALSE);
       glEnable(GL_CULL_FACE);
       glCullFace(GL_FRONT);
       glEnable(GL_DEPTH_CLAMP);
-      if (blend) {
-        glEnable(GL_BLEND);
-        glBlendEquation(GL_FUNC_ADD);
-        glBlendFunc(GL_ONE, GL_ONE);
-      }
-      break;
+      [[fallthrough]];
     case Pass::kCombined:
-      // Full-screen triangles of the combined live passes: added like projector passes.
+      // (kCombined alone: full-screen triangles of the combined live passes, added like projector
+      // passes.)
       glEnable(GL_SCISSOR_TEST);
       glDisable(GL_DEPTH_TEST);
       glDepthMask(GL_FALSE);
@@ -794,19 +787,13 @@ struct Renderer::Impl {
     if (width == target_width && height == target_height) return absl::OkStatus();
     const GLuint old[] = {gbuffer_color, gbuffer_normal, gbuffer_depth, accum_live, accum_retained, accum_fade};
     glDeleteTextures(6, old);
-    gbuffer_color = MakeTexture2D(GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE, width, height);
-    gbuffer_normal = MakeTexture2D(GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE, width, height);
-    gbuffer_depth = MakeTexture2D(GL_DEPTH_COMPONENT32F, GL_DEPTH_COMPONENT, GL_FLOAT, width, height);
+    if (absl::Status s = MakeGBuffer(fbo_gbuffer, width, height, "G-buffer", gbuffer_color, gbuffer_normal, gbuffer_depth);
+        !s.ok()) {
+      return s;
+    }
     accum_live = MakeTexture2D(GL_RGBA32F, GL_RGBA, GL_FLOAT, width, height);
     accum_retained = MakeTexture2D(GL_RGBA32F, GL_RGBA, GL_FLOAT, width, height);
     accum_fade = MakeTexture2D(GL_R32F, GL_RED, GL_FLOAT, width, height);
-    glBindFramebuffer(GL_FRAMEBUFFER, fbo_gbuffer);
-    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, gbuffer_color, 0);
-    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT1, GL_TEXTURE_2D, gbuffer_normal, 0);
-    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_TEXTURE_2D, gbuffer_depth, 0);
-    const GLenum gbuffers[] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1};
-    glDrawBuffers(2, gbuffers);
-    if (absl::Status s = CheckFramebuffer(GL_FRAMEBUFFER, "G-buffer"); !s.ok()) return s;
     glBindFramebuffer(GL_FRAMEBUFFER, fbo_accum);
     glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, accum_live, 0);
     glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT1, GL_TEXTURE_2D, accum_retained, 0);
@@ -820,15 +807,32 @@ struct Renderer::Impl {
 
   bool CacheOn() const { return options.view_cache && cache_supported; }
 
+  // A G-buffer (shaded colour, packed normal, depth) of width x height attached to `fbo`.
+  static absl::Status MakeGBuffer(GLuint fbo, int width, int height, const char* what, GLuint& color, GLuint& normal,
+                                  GLuint& depth) {
+    color = MakeTexture2D(GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE, width, height);
+    normal = MakeTexture2D(GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE, width, height);
+    depth = MakeTexture2D(GL_DEPTH_COMPONENT32F, GL_DEPTH_COMPONENT, GL_FLOAT, width, height);
+    glBindFramebuffer(GL_FRAMEBUFFER, fbo);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, color, 0);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT1, GL_TEXTURE_2D, normal, 0);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_TEXTURE_2D, depth, 0);
+    const GLenum gbuffers[] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1};
+    glDrawBuffers(2, gbuffers);
+    return CheckFramebuffer(GL_FRAMEBUFFER, what);
+  }
+
   absl::Status EnsureCacheTargets(int width, int height) {
     view_caches.clear();
     const GLuint old[] = {cache_color, cache_normal, cache_depth, cache_retained, cache_fade, mapping_array};
     glDeleteTextures(6, old);
     cache_color = cache_normal = cache_depth = cache_retained = cache_fade = mapping_array = 0;
     if (!CacheOn()) return absl::OkStatus();
-    cache_color = MakeTexture2D(GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE, width, height);
-    cache_normal = MakeTexture2D(GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE, width, height);
-    cache_depth = MakeTexture2D(GL_DEPTH_COMPONENT32F, GL_DEPTH_COMPONENT, GL_FLOAT, width, height);
+    if (absl::Status s =
+            MakeGBuffer(fbo_cache_gbuffer, width, height, "view cache G-buffer", cache_color, cache_normal, cache_depth);
+        !s.ok()) {
+      return s;
+    }
     cache_retained = MakeTexture2D(GL_RGBA32F, GL_RGBA, GL_FLOAT, width, height);
     cache_fade = MakeTexture2D(GL_R32F, GL_RED, GL_FLOAT, width, height);
     glGenTextures(1, &mapping_array);
@@ -836,13 +840,6 @@ struct Renderer::Impl {
     glTexStorage3D(GL_TEXTURE_2D_ARRAY, 1, GL_RGBA32F, width, height, options.view_cache_entries);
     glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
     glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
-    glBindFramebuffer(GL_FRAMEBUFFER, fbo_cache_gbuffer);
-    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, cache_color, 0);
-    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT1, GL_TEXTURE_2D, cache_normal, 0);
-    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_TEXTURE_2D, cache_depth, 0);
-    const GLenum gbuffers[] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1};
-    glDrawBuffers(2, gbuffers);
-    if (absl::Status s = CheckFramebuffer(GL_FRAMEBUFFER, "view cache G-buffer"); !s.ok()) return s;
     glBindFramebuffer(GL_FRAMEBUFFER, fbo_cache_accum);
     glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT1, GL_TEXTURE_2D, cache_retained, 0);
     glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT2, GL_TEXTURE_2D, cache_fade, 0);
