@@ -42,29 +42,27 @@ class CsvReader {
     }
     return false;
   }
-  absl::StatusOr<double> Get(const std::string& column) const {
-    const size_t i = columns_.at(column);
-    if (i >= fields_.size()) return Error(column, "missing field");
-    const std::string& f = fields_[i];
-    double value = 0;
-    const auto [end, ec] = std::from_chars(f.data(), f.data() + f.size(), value);
-    if (ec != std::errc() || end != f.data() + f.size()) return Error(column, "not a number '" + f + "'");
-    return value;
-  }
-  absl::StatusOr<int64_t> GetInt(const std::string& column) const {
-    const size_t i = columns_.at(column);
-    if (i >= fields_.size()) return Error(column, "missing field");
-    const std::string& f = fields_[i];
-    int64_t value = 0;
-    const auto [end, ec] = std::from_chars(f.data(), f.data() + f.size(), value);
-    if (ec != std::errc() || end != f.data() + f.size()) return Error(column, "not an integer '" + f + "'");
-    return value;
-  }
+  absl::StatusOr<double> Get(const std::string& column) const { return Parse<double>(column, "a number"); }
+  absl::StatusOr<int64_t> GetInt(const std::string& column) const { return Parse<int64_t>(column, "an integer"); }
   absl::Status Error(const std::string& column, const std::string& why) const {
     return absl::InvalidArgumentError(absl::StrCat(label_, ":", line_, ": column ", column, ": ", why));
   }
 
  private:
+  // The field of `column` on the current line as a T; `what` names T in the error.
+  template <typename T>
+  absl::StatusOr<T> Parse(const std::string& column, const char* what) const {
+    const size_t i = columns_.at(column);
+    if (i >= fields_.size()) return Error(column, "missing field");
+    const std::string& f = fields_[i];
+    T value{};
+    const auto [end, ec] = std::from_chars(f.data(), f.data() + f.size(), value);
+    if (ec != std::errc() || end != f.data() + f.size()) {
+      return Error(column, absl::StrCat("not ", what, " '", f, "'"));
+    }
+    return value;
+  }
+
   std::string label_;
   std::ifstream in_;
   std::map<std::string, size_t> columns_;
