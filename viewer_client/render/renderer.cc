@@ -58,7 +58,14 @@ struct LineVertex {
 
 using GlMatrix = std::array<float, 16>;
 
-enum class Pass { kUpload, kShadow, kGbuffer, kProjector, kCombined, kResolve, kLines };
+// Stencil of the shadow-tested cached resolve: volume counts (kMark) in the low bits, then a bit
+// for pixels with an entry the models may hide (kMarkEntries).
+constexpr GLuint kVolumeStencilBits = 0x7F, kEntryStencilBit = 0x80;
+
+enum class Pass {
+  kUpload, kShadow, kGbuffer, kProjector, kCombined, kResolve, kMark, kMarkEntries, kResolveMarked, kResolveInVolumes,
+  kLines
+};
 
 // Every fixed-function state change of the renderer is here (STYLE habit 6).
 void ApplyPassState(Pass pass, bool blend = false) {
@@ -66,6 +73,7 @@ void ApplyPassState(Pass pass, bool blend = false) {
   glDisable(GL_BLEND);
   glDisable(GL_DEPTH_CLAMP);
   glDisable(GL_POLYGON_OFFSET_FILL);
+  glDisable(GL_STENCIL_TEST);
   glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
   switch (pass) {
     case Pass::kUpload:
@@ -112,6 +120,53 @@ void ApplyPassState(Pass pass, bool blend = false) {
       glEnable(GL_DEPTH_TEST);
       glDepthFunc(GL_ALWAYS);
       glDepthMask(GL_TRUE);
+      break;
+    case Pass::kMark:
+      // Counts, in the stencil, the convex volumes (wound counter-clockwise from outside) that
+      // hold the surface already in the depth buffer: +1 for a back face behind the surface, -1
+      // for a front face behind it, so a volume adds 1 exactly where its entry lies before the
+      // surface and its exit after (the eye inside it: no entry). Depth clamping keeps faces
+      // beyond the far plane (at depth 1, behind any surface); cleared pixels count nothing.
+      glEnable(GL_DEPTH_CLAMP);
+      glEnable(GL_SCISSOR_TEST);
+      glEnable(GL_DEPTH_TEST);
+      glDepthFunc(GL_GREATER);
+      glDepthMask(GL_FALSE);
+      glColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
+      glEnable(GL_STENCIL_TEST);
+      glStencilMask(kVolumeStencilBits);
+      glStencilFunc(GL_ALWAYS, 0, 0xFF);
+      glStencilOpSeparate(GL_BACK, GL_KEEP, GL_KEEP, GL_INCR_WRAP);
+      glStencilOpSeparate(GL_FRONT, GL_KEEP, GL_KEEP, GL_DECR_WRAP);
+      break;
+    case Pass::kMarkEntries:
+      // Where some volume holds the surface, sets kEntryStencilBit where the fragment survives
+      // (the resolve's MARK variant discards pixels none of whose entries the models may hide).
+      glEnable(GL_SCISSOR_TEST);
+      glDisable(GL_DEPTH_TEST);
+      glDepthMask(GL_FALSE);
+      glColorMask(GL_FALSE, GL_FALSE, GL_FALSE, GL_FALSE);
+      glEnable(GL_STENCIL_TEST);
+      glStencilMask(kEntryStencilBit);
+      glStencilFunc(GL_NOTEQUAL, kEntryStencilBit, kVolumeStencilBits);
+      glStencilOp(GL_KEEP, GL_KEEP, GL_REPLACE);
+      break;
+    case Pass::kResolveMarked:
+    case Pass::kResolveInVolumes:
+      // Colour only where kMarkEntries set its bit (or kMark counted a volume): the shader writes no depth and never discards, so the
+      // stencil test runs before it and llvmpipe skips blocks that fail it. Without a stencil
+      // buffer the test passes everywhere: the same picture, at full cost.
+      glEnable(GL_SCISSOR_TEST);
+      glDisable(GL_DEPTH_TEST);
+      glDepthMask(GL_FALSE);
+      glEnable(GL_STENCIL_TEST);
+      glStencilMask(0);
+      if (pass == Pass::kResolveMarked) {
+        glStencilFunc(GL_EQUAL, kEntryStencilBit, kEntryStencilBit);
+      } else {
+        glStencilFunc(GL_NOTEQUAL, 0, kVolumeStencilBits);
+      }
+      glStencilOp(GL_KEEP, GL_KEEP, GL_KEEP);
       break;
     case Pass::kLines:
       glEnable(GL_SCISSOR_TEST);
@@ -278,17 +333,25 @@ void AppendModelVertices(const DynamicModel& m, std::vector<Vertex>& out) {
 
 // The four image corners of a camera at depth_m along its optical axis, NDC scaled by `scale`
 // (1: the image rectangle), counter-clockwise from bottom-left.
+// The corners of the image rectangle `ndc` (x0, y0, x1, y1) at depth_m along the optical axis.
 std::array<Eigen::Vector3d, 4> FrustumCorners(const Eigen::Matrix4d& local_from_eye, const Eigen::Matrix4d& eye_from_clip,
-                                              double scale, double depth_m) {
+                                              const Eigen::Vector4d& ndc_rect, double depth_m) {
   std::array<Eigen::Vector3d, 4> corners;
-  const double ndc[4][2] = {{-1, -1}, {1, -1}, {1, 1}, {-1, 1}};
+  const double ndc[4][2] = {{ndc_rect[0], ndc_rect[1]}, {ndc_rect[2], ndc_rect[1]}, {ndc_rect[2], ndc_rect[3]},
+                            {ndc_rect[0], ndc_rect[3]}};
   for (int k = 0; k < 4; ++k) {
-    Eigen::Vector4d e = eye_from_clip * Eigen::Vector4d(scale * ndc[k][0], scale * ndc[k][1], -1, 1);
+    Eigen::Vector4d e = eye_from_clip * Eigen::Vector4d(ndc[k][0], ndc[k][1], -1, 1);
     e /= e.w();
     const Eigen::Vector3d at_depth = e.head<3>() * (depth_m / -e.z());
     corners[k] = (local_from_eye * at_depth.homogeneous()).head<3>();
   }
   return corners;
+}
+
+// The image (NDC scaled by `scale`) at depth_m.
+std::array<Eigen::Vector3d, 4> FrustumCorners(const Eigen::Matrix4d& local_from_eye, const Eigen::Matrix4d& eye_from_clip,
+                                              double scale, double depth_m) {
+  return FrustumCorners(local_from_eye, eye_from_clip, Eigen::Vector4d(-scale, -scale, scale, scale), depth_m);
 }
 
 // Camera centre to the four image corners at depth_m along the optical axis, plus the rectangle.
@@ -413,6 +476,52 @@ struct RetainedSnapshot {
 };
 
 // Per-projector matrices for one frame.
+// The shadow-map rectangle `rect` (pixels) where a projector's dynamic layer may differ from its
+// static one, as (x0, y0, x1, y1) in the projector's own undistorted NDC, padded for the normal
+// offset and the 2x2 comparison filter of the lookups.
+Eigen::Vector4d ModelNdcRect(const Projector& p, const Viewport& rect, int shadow_map_size) {
+  const double pad = kNormalOffsetTexels + 2, margin = DistortionMargin(p);
+  return margin * Eigen::Vector4d(2 * (rect.x - pad) / shadow_map_size - 1, 2 * (rect.y - pad) / shadow_map_size - 1,
+                                  2 * (rect.x + rect.width + pad) / shadow_map_size - 1,
+                                  2 * (rect.y + rect.height + pad) / shadow_map_size - 1);
+}
+
+// Where a projector's (distorted) image, as video (u, v) of its layer, may show the dynamic models
+// its shadow map holds in `rect` (ModelNdcRect): an entry whose (u, v) lies outside sees the static
+// shadow map only. The distortion is bounded over a grid of the rectangle (the forward model
+// evaluated as the projector shader does).
+Eigen::Vector4f ModelUvRect(const Projector& p, const Viewport& rect, int shadow_map_size, int layer_width,
+                            int layer_height) {
+  const Eigen::Vector4d r = ModelNdcRect(p, rect, shadow_map_size);
+  const double x0 = r[0], y0 = r[1], x1 = r[2], y1 = r[3];
+  Eigen::Vector2d lo = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  const bool distorted = HasDistortion(p);
+  const int steps = distorted ? 16 : 1;
+  const double p00 = p.projection(0, 0), p02 = p.projection(0, 2), p11 = p.projection(1, 1), p12 = p.projection(1, 2);
+  const std::array<double, 5>& k = p.distortion;
+  for (int i = 0; i <= steps; ++i) {
+    for (int j = 0; j <= steps; ++j) {
+      Eigen::Vector2d ndc(x0 + (x1 - x0) * i / steps, y0 + (y1 - y0) * j / steps);
+      if (distorted) {
+        const double x = (ndc.x() + p02) / p00, y = -(ndc.y() + p12) / p11, r2 = x * x + y * y;
+        const double radial = 1 + r2 * (k[0] + r2 * (k[1] + r2 * k[4]));
+        const double xd = x * radial + 2 * k[2] * x * y + k[3] * (r2 + 2 * x * x);
+        const double yd = y * radial + k[2] * (r2 + 2 * y * y) + 2 * k[3] * x * y;
+        ndc = Eigen::Vector2d(p00 * xd - p02, -p11 * yd - p12);
+      }
+      lo = lo.cwiseMin(ndc);
+      hi = hi.cwiseMax(ndc);
+    }
+  }
+  // One grid cell of slack for the curvature between samples, and a video texel.
+  const Eigen::Vector2d slack = distorted ? Eigen::Vector2d((hi - lo) / steps) : Eigen::Vector2d::Zero();
+  lo -= slack;
+  hi += slack;
+  const float du = 1.0f / static_cast<float>(layer_width), dv = 1.0f / static_cast<float>(layer_height);
+  return Eigen::Vector4f(static_cast<float>(0.5 + 0.5 * lo.x()) - du, static_cast<float>(0.5 - 0.5 * hi.y()) - dv,
+                         static_cast<float>(0.5 + 0.5 * hi.x()) + du, static_cast<float>(0.5 - 0.5 * lo.y()) + dv);
+}
+
 struct ProjectorGl {
   GlMatrix clip_from_local{}, shadow_clip_from_local{};
   Eigen::Matrix4d shadow_projection = Eigen::Matrix4d::Identity();  // widened by the distortion margin
@@ -458,30 +567,12 @@ struct Bounds {
   }
 };
 
-// The frustum volume of a projector, cut at the farthest scene point (fewer pixels to shade) and
-// widened by the distortion margin: 12 triangles wound counter-clockwise from outside.
-void AppendFrustumVolume(const Projector& p, const Bounds& scene, const ShadowSlot& shadow, std::vector<LineVertex>& out,
-                         std::array<Eigen::Vector3d, 8>& corners_out) {
-  double far_m = p.far_m;
-  if (!scene.empty()) {
-    double farthest = 0;
-    for (const Eigen::Vector3d& c : scene.Corners()) farthest = std::max(farthest, -(p.view * c.homogeneous()).z());
-    far_m = std::clamp(farthest * 1.01, p.near_m * 1.01, p.far_m);
-  }
-  // The static shadow map says how far the projector actually sees (dynamic models stand on the
-  // static model, within that depth). Most cameras look at the ground: a much smaller footprint.
-  if (shadow.valid && !shadow.sees_void) far_m = std::clamp(shadow.visible_far_m * 1.02 + 1, p.near_m * 1.01, far_m);
-  const Eigen::Matrix4d local_from_eye = p.view.inverse();
-  const Eigen::Matrix4d eye_from_clip = p.projection.inverse();
-  const double margin = DistortionMargin(p);
-  const std::array<Eigen::Vector3d, 4> near_c = FrustumCorners(local_from_eye, eye_from_clip, margin, p.near_m);
-  const std::array<Eigen::Vector3d, 4> far_c = FrustumCorners(local_from_eye, eye_from_clip, margin, far_m);
+// A frustum piece between the rectangles near_c and far_c (corners in the same order): 12
+// triangles wound counter-clockwise from outside.
+void AppendFrustumPiece(const std::array<Eigen::Vector3d, 4>& near_c, const std::array<Eigen::Vector3d, 4>& far_c,
+                        std::vector<LineVertex>& out) {
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-  for (int k = 0; k < 4; ++k) {
-    corners_out[k] = near_c[k];
-    corners_out[k + 4] = far_c[k];
-    centre += near_c[k] + far_c[k];
-  }
+  for (int k = 0; k < 4; ++k) centre += near_c[k] + far_c[k];
   centre /= 8;
   auto make = [](const Eigen::Vector3d& q) { return MakeLineVertex(q, Eigen::Vector3f::Zero()); };
   auto quad = [&](const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c, const Eigen::Vector3d& d) {
@@ -492,6 +583,56 @@ void AppendFrustumVolume(const Projector& p, const Bounds& scene, const ShadowSl
   quad(near_c[0], near_c[1], near_c[2], near_c[3]);
   quad(far_c[0], far_c[1], far_c[2], far_c[3]);
   for (int k = 0; k < 4; ++k) quad(near_c[k], near_c[(k + 1) % 4], far_c[(k + 1) % 4], far_c[k]);
+}
+
+// Where a projector's volume ends (depth along its axis): at the farthest scene point, or nearer
+// where its static shadow map saw no farther surface.
+double VolumeFarM(const Projector& p, const Bounds& scene, const ShadowSlot& shadow) {
+  double far_m = p.far_m;
+  if (!scene.empty()) {
+    double farthest = 0;
+    for (const Eigen::Vector3d& c : scene.Corners()) farthest = std::max(farthest, -(p.view * c.homogeneous()).z());
+    far_m = std::clamp(farthest * 1.01, p.near_m * 1.01, p.far_m);
+  }
+  // The static shadow map says how far the projector actually sees (dynamic models stand on the
+  // static model, within that depth). Most cameras look at the ground: a much smaller footprint.
+  if (shadow.valid && !shadow.sees_void) far_m = std::clamp(shadow.visible_far_m * 1.02 + 1, p.near_m * 1.01, far_m);
+  return far_m;
+}
+
+// The frustum volume of a projector, cut at VolumeFarM (fewer pixels to shade) and widened by the
+// distortion margin: 12 triangles wound counter-clockwise from outside.
+void AppendFrustumVolume(const Projector& p, const Bounds& scene, const ShadowSlot& shadow, std::vector<LineVertex>& out,
+                         std::array<Eigen::Vector3d, 8>& corners_out) {
+  const Eigen::Matrix4d local_from_eye = p.view.inverse();
+  const Eigen::Matrix4d eye_from_clip = p.projection.inverse();
+  const double margin = DistortionMargin(p);
+  const std::array<Eigen::Vector3d, 4> near_c = FrustumCorners(local_from_eye, eye_from_clip, margin, p.near_m);
+  const std::array<Eigen::Vector3d, 4> far_c =
+      FrustumCorners(local_from_eye, eye_from_clip, margin, VolumeFarM(p, scene, shadow));
+  for (int k = 0; k < 4; ++k) {
+    corners_out[k] = near_c[k];
+    corners_out[k + 4] = far_c[k];
+  }
+  AppendFrustumPiece(near_c, far_c, out);
+}
+
+// The part of a projector's frustum where its dynamic shadow map may differ from the static one:
+// the rectangle of the shadow map the models cover (ModelNdcRect of slot.dynamic_rect), from the nearest model corner to the end of the projector's volume. A surface point outside
+// it sees the projector past no model. 36 vertices; none when no model is in its map.
+void AppendShadowVolume(const Projector& p, const ShadowSlot& slot, const std::vector<Bounds>& models,
+                        const Bounds& scene, int shadow_map_size, std::vector<LineVertex>& out) {
+  if (!slot.dynamic_has_models) return;
+  double nearest = std::numeric_limits<double>::infinity();
+  for (const Bounds& b : models) {
+    for (const Eigen::Vector3d& c : b.Corners()) nearest = std::min(nearest, -(p.view * c.homogeneous()).z());
+  }
+  const double far_m = VolumeFarM(p, scene, slot);
+  const double near_m = std::clamp(nearest, p.near_m, far_m);
+  const Eigen::Vector4d ndc = ModelNdcRect(p, slot.dynamic_rect, shadow_map_size);
+  const Eigen::Matrix4d local_from_eye = p.view.inverse(), eye_from_clip = p.projection.inverse();
+  AppendFrustumPiece(FrustumCorners(local_from_eye, eye_from_clip, ndc, near_m),
+                     FrustumCorners(local_from_eye, eye_from_clip, ndc, far_m), out);
 }
 
 // False when all eight corners lie outside one clip plane of the view (the volume cannot show).
@@ -710,11 +851,14 @@ struct Renderer::Impl {
   Program projector, mapping, combined;
   // Resolve variants, index any_live + 2 * any_retained + 4 * cached + 8 * shadowed
   // (resolve.frag.glsl: LIVE, RETAINED, CACHED, SHADOWED; shadowed only with cached and live).
-  std::array<Program, 16> resolve;
+  std::array<Program, 32> resolve;  // by variant bits: live 1, retained 2, cached 4, shadowed 8, mark 16
   Uniforms gbuffer_u;
   GLint shadow_clip_from_local = -1, line_clip_from_local = -1;
 
   MeshBuffers static_mesh, dynamic_mesh, sky_mesh, lines, volumes;
+  // In `volumes` after the frustum volumes: the live projectors' shadow volumes of this frame.
+  GLint shadow_volume_first = 0;
+  GLsizei shadow_volume_count = 0;
   std::vector<MeshChunk> static_chunks;  // static_mesh's index buffer, by grid cell
   GLuint empty_vao = 0;
   GLuint video_array = 0, retained_video_array = 0, scratch_texture = 0;
@@ -1231,10 +1375,16 @@ struct Renderer::Impl {
   // with the dynamic models (the layers' matrices come from `passes`).
   // drawn (uncached): the viewport the working targets hold the view in (the view's own, or a
   // reduced one at the same corner: scaled up).
+  // shadowed_pass (with shadowed): kMarkEntries only sets kEntryStencilBit where some entry may be
+  // hidden; kResolveMarked draws where that bit is set, kResolveInVolumes where the volume count
+  // is not 0 (MarkShadowVolumes).
   void Resolve(const View& view, bool any_live, bool any_retained, const ViewCache* cache = nullptr,
-               const std::vector<ProjectorPass>* shadowed = nullptr, const Viewport* drawn = nullptr) {
-    ApplyPassState(Pass::kResolve);
-    const int variant = (any_live ? 1 : 0) + (any_retained ? 2 : 0) + (cache ? 4 : 0) + (shadowed ? 8 : 0);
+               const std::vector<ProjectorPass>* shadowed = nullptr, const Viewport* drawn = nullptr,
+               Pass shadowed_pass = Pass::kResolveMarked) {
+    const bool mark = shadowed && shadowed_pass == Pass::kMarkEntries;
+    ApplyPassState(shadowed ? shadowed_pass : Pass::kResolve);
+    const int variant =
+        (any_live ? 1 : 0) + (any_retained ? 2 : 0) + (cache ? 4 : 0) + (shadowed ? 8 : 0) + (mark ? 16 : 0);
     glUseProgram(resolve[variant].id);
     const Uniforms& u = resolve[variant].u;
     const Viewport& v = view.viewport;
@@ -1265,16 +1415,24 @@ struct Renderer::Impl {
       BindTexture(kLiveUnit, GL_TEXTURE_2D, accum_live);
     }
     if (shadowed) {
-      std::vector<float> matrices(16 * kMaxProjectors, 0.0f), position_offset(4 * kMaxProjectors, 0.0f);
+      std::vector<float> matrices(16 * kMaxProjectors, 0.0f), position_offset(4 * kMaxProjectors, 0.0f),
+          model_uv(4 * kMaxProjectors, 0.0f);
+      for (int l = 0; l < kMaxProjectors; ++l) model_uv[4 * l] = 1.0f;  // empty: u0 > u1
       for (const ProjectorPass& pass : *shadowed) {
         if (pass.retained) continue;
+        const ShadowSlot& slot = slots[pass.layer].shadow;
+        if (!slot.dynamic_has_models) continue;
         const ProjectorGl g = MakeProjectorGl(*pass.projector, options.shadow_map_size);
         std::copy(g.shadow_clip_from_local.begin(), g.shadow_clip_from_local.end(), matrices.begin() + 16 * pass.layer);
         for (int k = 0; k < 3; ++k) position_offset[4 * pass.layer + k] = static_cast<float>(pass.projector->position[k]);
-        position_offset[4 * pass.layer + 3] = slots[pass.layer].shadow.dynamic_has_models ? g.normal_offset : -1.0f;
+        position_offset[4 * pass.layer + 3] = g.normal_offset;
+        const Eigen::Vector4f uv = ModelUvRect(*pass.projector, slot.dynamic_rect, options.shadow_map_size,
+                                               options.video_layer_width, options.video_layer_height);
+        std::copy(uv.data(), uv.data() + 4, model_uv.begin() + 4 * pass.layer);
       }
       glUniformMatrix4fv(u["u_shadow_clip_from_local"], kMaxProjectors, GL_FALSE, matrices.data());
       glUniform4fv(u["u_position_offset"], kMaxProjectors, position_offset.data());
+      glUniform4fv(u["u_model_uv"], kMaxProjectors, model_uv.data());
       glUniformMatrix4fv(u["u_local_from_window"], 1, GL_FALSE, ToGlArray(LocalFromWindow(view)).data());
       glUniform1i(u["u_gbuffer_normal"], kGbufferNormalUnit);
       glUniform1i(u["u_shadow"], kShadowUnit);
@@ -1483,93 +1641,32 @@ struct Renderer::Impl {
     cache.built_s = Now();
   }
 
-  // The lowest static surface over the x-y extent of `box` (chunk boxes), +inf where no chunk is.
-  double FloorUnder(const Bounds& box) const {
-    double z = std::numeric_limits<double>::infinity();
-    for (const MeshChunk& chunk : static_chunks) {
-      const Bounds& c = chunk.bounds;
-      if (c.lo.x() <= box.hi.x() && box.lo.x() <= c.hi.x() && c.lo.y() <= box.hi.y() && box.lo.y() <= c.hi.y()) {
-        z = std::min(z, c.lo.z());
-      }
-    }
-    return z;
+  // Stencil > 0 (within the current scissor box, cleared first) where the surface in the depth
+  // buffer lies inside some live projector's shadow volume: the only pixels whose cached entries
+  // the models may hide.
+  void MarkShadowVolumes(const View& view) {
+    glStencilMask(0xFF);
+    glClearStencil(0);
+    glClear(GL_STENCIL_BUFFER_BIT);
+    if (shadow_volume_count == 0) return;
+    ApplyPassState(Pass::kMark);
+    glUseProgram(line_program);
+    glUniformMatrix4fv(line_clip_from_local, 1, GL_FALSE, ToGlArray(view.projection * view.view).data());
+    volumes.Draw(GL_TRIANGLES, shadow_volume_first, shadow_volume_count);
   }
 
-  // The points bounding what `corners` (a model's box) hides from a projector at `centre`: the
-  // corners and where the rays through them reach the lowest static surface under that region
-  // (found by widening until the chunks under the swept region reach no lower; the terrain is a
-  // height field, so a ray below it there has hit something). Rays that do not descend, and all
-  // rays when the region leaves the static model (they may reach the sky dome), are added as
-  // directions instead (their whole length).
-  void AppendShadowRegion(const std::array<Eigen::Vector3d, 8>& corners, const Eigen::Vector3d& centre,
-                          std::vector<Eigen::Vector4d>& points) const {
-    Bounds region;
-    for (const Eigen::Vector3d& q : corners) region.Add(q);
-    double floor_z = FloorUnder(region);
-    auto as_directions = [&] {
-      for (const Eigen::Vector3d& q : corners) points.emplace_back((q - centre).x(), (q - centre).y(), (q - centre).z(), 0);
-    };
-    std::vector<Eigen::Vector4d> ends;
-    for (int widen = 0; widen < 8; ++widen) {
-      if (!std::isfinite(floor_z)) return as_directions();
-      ends.clear();
-      Bounds swept = region;
-      for (const Eigen::Vector3d& q : corners) {
-        const Eigen::Vector3d ray = q - centre;
-        if (q.z() <= floor_z) continue;
-        if (!(ray.z() < -1e-9)) {
-          ends.emplace_back(ray.x(), ray.y(), ray.z(), 0);
-          continue;
-        }
-        const Eigen::Vector3d end = centre + ray * ((floor_z - centre.z()) / ray.z());
-        ends.push_back(end.homogeneous());
-        swept.Add(end);
-      }
-      const double lower = FloorUnder(swept);
-      if (lower >= floor_z) {
-        if (options.display.sky && (swept.lo.x() < static_bounds.lo.x() || swept.hi.x() > static_bounds.hi.x() ||
-                                    swept.lo.y() < static_bounds.lo.y() || swept.hi.y() > static_bounds.hi.y())) {
-          return as_directions();
-        }
-        points.insert(points.end(), ends.begin(), ends.end());
-        return;
-      }
-      floor_z = lower;
-    }
-    as_directions();
-  }
-
-  // Screen rectangles of a view that dynamic models may change: `models`, each model's own box
-  // (drawn exactly), and `shadows`, for each live projector that may see a model the region the
-  // model hides from it (AppendShadowRegion; the cached entries are shadow-tested there).
-  struct DynamicRegions {
-    std::vector<Viewport> models, shadows;
-  };
-  DynamicRegions DynamicRects(const View& view, const std::vector<ProjectorPass>& passes,
-                              const std::vector<char>& visible) const {
-    DynamicRegions regions;
-    const Viewport& v = view.viewport;
+  // The screen rectangles of a view around the dynamic models' boxes (drawn exactly over a cached
+  // view), merged so that none overlap.
+  std::vector<Viewport> ModelRects(const View& view) const {
+    std::vector<Viewport> rects;
     const Eigen::Matrix4d clip_from_local = view.projection * view.view;
     for (const Bounds& box : model_bounds) {
-      const std::array<Eigen::Vector3d, 8> corners = box.Corners();
       std::vector<Eigen::Vector4d> points;
-      for (const Eigen::Vector3d& c : corners) points.push_back(c.homogeneous());
-      if (const std::optional<Viewport> rect = ScreenRect(points, clip_from_local, v)) regions.models.push_back(*rect);
-      if (!options.dynamic_objects_cast_shadows) continue;
-      const size_t own = points.size();
-      for (size_t k = 0; k < passes.size(); ++k) {
-        const ProjectorPass& pass = passes[k];
-        if (pass.retained || !visible[k]) continue;
-        const Projector& p = *pass.projector;
-        if (!VolumeMayBeVisible(corners, p.projection * p.view)) continue;
-        AppendShadowRegion(corners, p.position, points);
-      }
-      if (points.size() == own) continue;
-      if (const std::optional<Viewport> rect = ScreenRect(points, clip_from_local, v)) regions.shadows.push_back(*rect);
+      for (const Eigen::Vector3d& c : box.Corners()) points.push_back(c.homogeneous());
+      if (const std::optional<Viewport> rect = ScreenRect(points, clip_from_local, view.viewport)) rects.push_back(*rect);
     }
-    MergeOverlapping(regions.models);
-    MergeOverlapping(regions.shadows);
-    return regions;
+    MergeOverlapping(rects);
+    return rects;
   }
 
   // Merges overlapping rectangles until none overlap (each pixel drawn once).
@@ -1645,17 +1742,34 @@ struct Renderer::Impl {
     } else {
       ++stats.view_cache_hits;
     }
+    // Where a model is in a visible live projector's shadow map, the cached entries are tested
+    // against it (only those whose video falls where the models are in that projector's image).
+    bool shadowed = false;
+    int visible_live = 0;
+    for (size_t k = 0; k < passes.size(); ++k) {
+      if (!visible[k] || passes[k].retained) continue;
+      ++visible_live;
+      if (slots[passes[k].layer].shadow.dynamic_has_models) shadowed = true;
+    }
+    shadowed = shadowed && cache.any_live && options.dynamic_objects_cast_shadows;
     glBindFramebuffer(GL_FRAMEBUFFER, target);
     Resolve(view, cache.any_live, cache.any_retained, &cache);
-    DynamicRegions regions = DynamicRects(view, passes, visible);
-    if (cache.any_live) {
-      for (const Viewport& r : regions.shadows) {
-        glScissor(r.x, r.y, r.width, r.height);
-        Resolve(view, cache.any_live, cache.any_retained, &cache, &passes);
-        ++stats.view_cache_patches;
+    if (shadowed) {
+      MarkShadowVolumes(view);
+      // Inside the volumes, keep only pixels with an entry the models may hide. That pass runs on
+      // every pixel of the view (a shader that discards and writes stencil gets no early stencil
+      // test on llvmpipe), so it pays only where the view sees more cameras than a pixel keeps
+      // entries: with fewer, every volume that holds the surface has its entry there anyway.
+      const bool by_entries = visible_live > options.view_cache_entries;
+      if (by_entries) {
+        Resolve(view, cache.any_live, cache.any_retained, &cache, &passes, nullptr, Pass::kMarkEntries);
+        ++stats.view_cache_entry_marks;
       }
+      Resolve(view, cache.any_live, cache.any_retained, &cache, &passes, nullptr,
+              by_entries ? Pass::kResolveMarked : Pass::kResolveInVolumes);
+      ++stats.view_cache_shadow_tests;
     }
-    cache.patches = std::move(regions.models);
+    cache.patches = ModelRects(view);
     cache.last_frame = stats.frames + 1;
 
     for (const Viewport& r : cache.patches) {
@@ -1752,17 +1866,18 @@ absl::StatusOr<std::unique_ptr<Renderer>> Renderer::Create(const RendererOptions
       return s;
     }
   }
-  for (int variant = 0; variant < (impl->cache_supported ? 16 : 4); ++variant) {
+  for (int variant = 0; variant < (impl->cache_supported ? 32 : 4); ++variant) {
     if ((variant & 8) && (variant & 5) != 5) continue;
+    if ((variant & 16) && !(variant & 8)) continue;
     const std::string defines = std::string(variant & 1 ? "#define LIVE\n" : "") +
                                 (variant & 2 ? "#define RETAINED\n" : "") + (variant & 4 ? "#define CACHED\n" : "") +
-                                (variant & 8 ? "#define SHADOWED\n" : "") + entries + "#define MAX_PROJECTORS " +
+                                (variant & 8 ? "#define SHADOWED\n" : "") + (variant & 16 ? "#define MARK\n" : "") + entries + "#define MAX_PROJECTORS " +
                                 std::to_string(kMaxProjectors) + "\n";
     if (absl::Status s = build(impl->resolve[variant], "shaders/resolve.vert.glsl", "shaders/resolve.frag.glsl", defines,
                                {"u_gbuffer_color", "u_gbuffer_depth", "u_live", "u_retained", "u_fade", "u_clear_color",
                                 "u_tint_by_age", "u_fade_scale", "u_mapping", "u_video", "u_last_wins",
                                 "u_gbuffer_normal", "u_local_from_window", "u_shadow", "u_shadow_clip_from_local",
-                                "u_position_offset", "u_source_origin", "u_source_scale"});
+                                "u_position_offset", "u_model_uv", "u_source_origin", "u_source_scale"});
         !s.ok()) {
       return s;
     }
@@ -2044,6 +2159,16 @@ absl::Status Renderer::Render(const std::vector<View>& views, int framebuffer_wi
       AppendFrustumVolume(r.projector, scene, r.shadow, volume_vertices, passes.back().corners);
     }
   }
+  // Then the live projectors' shadow volumes of the dynamic models (the stencil of cached views).
+  d.shadow_volume_first = static_cast<GLint>(volume_vertices.size());
+  if (d.options.dynamic_objects_cast_shadows) {
+    for (const ProjectorPass& pass : passes) {
+      if (pass.retained) continue;
+      AppendShadowVolume(*pass.projector, d.slots[pass.layer].shadow, d.model_bounds, scene, d.options.shadow_map_size,
+                         volume_vertices);
+    }
+  }
+  d.shadow_volume_count = static_cast<GLsizei>(volume_vertices.size()) - d.shadow_volume_first;
   d.volumes.Upload(volume_vertices, GL_STREAM_DRAW);
   d.reduced_views.clear();
 

@@ -190,9 +190,10 @@ struct RendererOptions {
   // layers, the display options and the retained snapshots are as in its last frame, the G-buffer
   // of the static model and a per-pixel mapping of the view_cache_entries best live projector
   // entries (video u, v, layer, weight) are kept; such a frame is one resolve pass that samples the
-  // current video through the mapping. In the screen rectangle of the region a dynamic model hides
-  // from the projectors that may see it, each cached entry is also tested against its projector's
-  // shadow map with the models; in the model's own screen box the exact passes are drawn. Where
+  // current video through the mapping. A cached entry whose video (u, v) lies where dynamic models
+  // are in its projector's image (a rectangle per projector, from the models' extent in its shadow
+  // map) is also tested against that shadow map with the models; in a model's own screen box the
+  // exact passes are drawn. Where
   // more than view_cache_entries cameras overlap, only the best ones are blended (and where a model
   // hides one of them, the next one is not brought in). A view whose inputs change from one frame
   // to the next (flying, a turning camera) is drawn in full; its cache is built in the first frame
@@ -235,9 +236,14 @@ struct RenderStats {
   uint64_t chunks_culled = 0;        // static-model chunks skipped (G-buffer and shadow passes): off screen
   uint64_t view_cache_builds = 0;    // views whose cache was (re)built: G-buffer and mapping drawn
   uint64_t view_cache_hits = 0;      // views drawn from an unchanged cache (resolve only)
-  // Screen rectangles around dynamic models drawn over a cached view: a model's own box drawn
-  // exactly, or the region it may hide from projectors, where cached entries are shadow-tested.
+  // Screen rectangles around dynamic models drawn exactly over a cached view.
   uint64_t view_cache_patches = 0;
+  // Cached views resolved with the models' shadow test: some visible live projector's shadow map
+  // held a model, and entries whose video lies where the models are in its image were tested.
+  uint64_t view_cache_shadow_tests = 0;
+  // ... of which saw more live cameras than view_cache_entries: pixels with an entry the models may
+  // hide were picked first (a full-view pass), the shadow volumes alone do not bound them then.
+  uint64_t view_cache_entry_marks = 0;
   // Views drawn in full: cache off or unsupported, overlapping views, or inputs that changed since
   // the view's previous frame (the cache is built on the first frame they stay the same).
   uint64_t views_uncached = 0;

@@ -1178,6 +1178,43 @@ TEST_F(ViewCacheTest, CachedFramesEqualExactOnesAcrossPoliciesLensesRetentionAnd
   Step([](Renderer& r) { return r.SetDynamicObjects({}); }, "movers gone");
 }
 
+// More live cameras in the view than a pixel keeps entries (5 > 4): the models' shadow test first
+// keeps the pixels with an entry the box may hide (the entries pass), then tests them. No pixel
+// sees more than 3 of the cameras, so the cached picture must still equal the exact one.
+TEST_F(ViewCacheTest, MoverShadowsMatchExactWithMoreCamerasThanEntries) {
+  const std::vector<uint8_t> gradient = GradientImage(640, 480), green = SolidImage(640, 480, {20, 200, 90});
+  std::vector<Projector> projectors = {
+      MakeProjector({PinholeIntrinsics::FromFov(640, 480, 70), LookAt({-12, 10, 6}, {-10, 6, 0})}, gradient, 1),
+      MakeProjector(projector_, image_, 1)};
+  const std::array<std::pair<Eigen::Vector3d, Eigen::Vector3d>, 3> narrow = {
+      std::pair{Eigen::Vector3d(10, 12, 8), Eigen::Vector3d(12, 14, 0)},
+      std::pair{Eigen::Vector3d(12, -12, 8), Eigen::Vector3d(14, -14, 0)},
+      std::pair{Eigen::Vector3d(-14, -14, 8), Eigen::Vector3d(-15, -16, 0)}};
+  for (const auto& [eye, at] : narrow) {
+    projectors.push_back(MakeProjector({PinholeIntrinsics::FromFov(640, 480, 20), LookAt(eye, at)}, green, 1));
+  }
+  for (size_t k = 0; k < projectors.size(); ++k) projectors[k].camera_id = "cam" + std::to_string(k);
+  uint64_t serial = 1;
+  auto set = [&](Renderer& r) {
+    for (Projector& p : projectors) p.image_serial = serial;
+    return r.SetProjectors(projectors);
+  };
+  Step(set, "five projectors");
+  ++serial;
+  Step(set, "still: the cache is built");
+  const RenderStats built = renderer_->stats();
+  for (double x : {-9.0, -8.0, -7.0}) {
+    ++serial;
+    Step(set, "new video");
+    Step([x](Renderer& r) { return r.SetDynamicObjects({DynamicBox{{x, 6, 0}, 0.3, {1, 1, 3}, {0.2f, 0.8f, 0.2f}}}); },
+         "box at x " + std::to_string(x));
+  }
+  const RenderStats after = renderer_->stats();
+  EXPECT_EQ(after.view_cache_builds, built.view_cache_builds) << "nothing but video and the mover changed";
+  EXPECT_GT(after.view_cache_entry_marks, built.view_cache_entry_marks) << "the entries pass ran";
+  EXPECT_GT(after.view_cache_shadow_tests, built.view_cache_shadow_tests);
+}
+
 // A view that moves every frame is drawn at half resolution (moving_view_scale 2) and scaled up;
 // the first frame it stays still is drawn in full (the cache build), as the exact renderer does.
 TEST_F(SceneTest, MovingView_DrawnAtReducedResolutionThenInFullWhenStill) {

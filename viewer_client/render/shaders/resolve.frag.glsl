@@ -8,7 +8,7 @@
 // u_entries (video u, v, layer, weight) per pixel, the current frames sampled there and blended by
 // weight (the same weights the per-projector passes would sum; more than ENTRIES overlapping
 // cameras are truncated to the best ENTRIES). SHADOWED (with CACHED): entries are tested against
-// the projectors' shadow maps with the dynamic models in them (see Lit).
+// the projectors' shadow maps with the dynamic models in them where the models may hide them (Lit).
 uniform sampler2D u_gbuffer_color;
 uniform sampler2D u_gbuffer_depth;
 uniform sampler2D u_live;      // (sum weight * video, sum weight)
@@ -33,31 +33,53 @@ vec4 WeightedVideo(vec4 entry) {
 }
 #endif
 #ifdef SHADOWED
-// Where dynamic models may hide the surface from some projectors (screen rectangles the renderer
-// computes): each cached entry is tested against its projector's shadow map with the models in it,
-// as the projector pass does (the point moved along its normal by about one texel).
+// Where dynamic models are in some projectors' shadow maps (drawn over the plain cached resolve):
+// an entry is tested against its projector's shadow map with the models in it, as the projector
+// pass does (the point moved along its normal by about one texel), but only when its video (u, v)
+// lies in the rectangle of that projector's image the models may cover (u_model_uv): elsewhere the
+// dynamic shadow map equals the static one, whose test the entry passed when the cache was built.
+// Drawn over the plain cached resolve only where the stencil says so: the renderer first counts
+// there the live projectors' shadow volumes of the models that hold the surface, then, inside
+// them, the MARK variant keeps the pixels with an entry the models may hide (llvmpipe runs every
+// instruction for every block with a live pixel, both sides of a branch and after a discard, so
+// the cost is cut by the stencil test before the shader runs).
 uniform sampler2D u_gbuffer_normal;
 uniform mat4 u_local_from_window;
 uniform sampler2DArrayShadow u_shadow;
 uniform mat4 u_shadow_clip_from_local[MAX_PROJECTORS];  // by layer
-// projector position (local), normal offset; offset < 0: no model in this projector's shadow map
-// (the cached entry already passed its static shadow test).
-uniform vec4 u_position_offset[MAX_PROJECTORS];
+uniform vec4 u_position_offset[MAX_PROJECTORS];  // projector position (local), normal offset
+uniform vec4 u_model_uv[MAX_PROJECTORS];  // (u0, v0, u1, v1) per layer; empty (u0 > u1): no model
 
-bool Lit(float layer, vec3 position, vec3 n) {
-  int l = int(layer + 0.5);
-  vec4 po = u_position_offset[l];
-  if (po.w < 0.0) return true;
+bool MayBeHidden(vec4 entry) {
+  vec4 r = u_model_uv[int(entry.z + 0.5)];
+  return all(greaterThanEqual(entry.xy, r.xy)) && all(lessThanEqual(entry.xy, r.zw));
+}
+
+bool Lit(vec4 entry, vec3 position, vec3 n) {
+  if (!MayBeHidden(entry)) return true;
+  vec4 po = u_position_offset[int(entry.z + 0.5)];
   float distance_m = max(length(po.xyz - position), 1e-6);
-  vec4 clip = u_shadow_clip_from_local[l] * vec4(position + n * (distance_m * po.w), 1.0);
+  vec4 clip = u_shadow_clip_from_local[int(entry.z + 0.5)] * vec4(position + n * (distance_m * po.w), 1.0);
   vec3 ndc = clip.xyz * (1.0 / max(clip.w, 1e-6));
-  return texture(u_shadow, vec4(0.5 * ndc.xy + 0.5, layer, 0.5 * ndc.z + 0.5)) > 0.0;
+  return texture(u_shadow, vec4(0.5 * ndc.xy + 0.5, entry.z, 0.5 * ndc.z + 0.5)) > 0.0;
 }
 #endif
 
 out vec4 o_color;
 
 void main() {
+#ifdef MARK
+  // Stencil pass before the SHADOWED one: survives only where some entry may be hidden.
+  ivec2 pixel = ivec2(gl_FragCoord.xy);
+  bool hidden = false;
+  for (int k = 0; k < ENTRIES; ++k) {
+    vec4 entry = texelFetch(u_mapping, ivec3(pixel, k), 0);
+    if (entry.w <= 0.0) break;
+    hidden = hidden || MayBeHidden(entry);
+  }
+  if (!hidden) discard;
+  o_color = vec4(0.0);
+#else
 #ifdef CACHED
   ivec2 pixel = ivec2(gl_FragCoord.xy);
 #else
@@ -65,7 +87,9 @@ void main() {
 #endif
   vec4 g = texelFetch(u_gbuffer_color, pixel, 0);
   float depth = texelFetch(u_gbuffer_depth, pixel, 0).r;
-  gl_FragDepth = depth;
+#ifndef SHADOWED
+  gl_FragDepth = depth;  // (SHADOWED: drawn over the plain resolve, depth kept, early stencil test)
+#endif
   vec3 color = g.a == 0.0 ? u_clear_color : g.rgb;
 #ifdef RETAINED
   vec4 retained = texelFetch(u_retained, pixel, 0);
@@ -79,8 +103,7 @@ void main() {
 #ifdef LIVE
 #ifdef CACHED
 #ifdef SHADOWED
-  vec4 window = vec4(gl_FragCoord.xy, 2.0 * depth - 1.0, 1.0);
-  vec4 local_h = u_local_from_window * window;
+  vec4 local_h = u_local_from_window * vec4(gl_FragCoord.xy, 2.0 * depth - 1.0, 1.0);
   vec3 position = local_h.xyz * (1.0 / local_h.w);
   vec3 n = normalize(2.0 * texelFetch(u_gbuffer_normal, pixel, 0).xyz - 1.0);
 #endif
@@ -89,7 +112,7 @@ void main() {
     vec4 entry = texelFetch(u_mapping, ivec3(pixel, k), 0);
     if (entry.w <= 0.0) break;
 #ifdef SHADOWED
-    if (!Lit(entry.z, position, n)) continue;
+    if (!Lit(entry, position, n)) continue;
 #endif
     live += WeightedVideo(entry);
     if (u_last_wins) break;
@@ -100,4 +123,5 @@ void main() {
   if (live.a > 0.0) color = live.rgb / live.a;  // live video wins over retained
 #endif
   o_color = vec4(color, 1.0);
+#endif
 }
