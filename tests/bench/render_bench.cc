@@ -56,6 +56,7 @@ struct RenderBenchOptions {
   bool cache_only = false;  // skip the cache-off rows and the exact-vs-cached comparison (profiling)
   bool per_projector = false;  // RendererOptions::combined_live_passes off (the passes before h7f)
   double moving_scale = viewer::RendererOptions().moving_view_scale;
+  int moving_cameras = viewer::RendererOptions().moving_view_cameras;
 };
 
 std::vector<int> ParseInts(const std::string& text) {
@@ -378,6 +379,7 @@ int RunRender(const RenderBenchOptions& o) {
     options.view_cache = cache;
     options.combined_live_passes = !o.per_projector;
     options.moving_view_scale = o.moving_scale;
+    options.moving_view_cameras = o.moving_cameras;
     absl::StatusOr<std::unique_ptr<viewer::Renderer>> renderer = viewer::Renderer::Create(options);
     if (!renderer.ok() || !(*renderer)->SetStaticMesh(mesh).ok()) {
       std::cerr << "ave-bench render: renderer: " << renderer.status().message() << "\n";
@@ -586,6 +588,9 @@ Runner AddRenderBench(CLI::App& sub) {
   sub.add_option("--shadow-cameras", o->shadow_cameras, "cameras in the shadow-size part")->check(CLI::Range(1, 64));
   sub.add_option("--truth-stride", o->truth_stride, "ray-cast every n-th pixel")->check(CLI::Range(1, 64));
   sub.add_option("--plot", o->plot, "PNG plot path");
+  sub.add_option("--moving-cameras", o->moving_cameras,
+                 "RendererOptions::moving_view_cameras (a moving view seeing more is reduced further)")
+      ->check(CLI::Range(1, 1000));
   sub.add_option("--moving-scale", o->moving_scale, "RendererOptions::moving_view_scale (1: moving views in full)")
       ->check(CLI::Range(1.0, 4.0));
   sub.add_flag("--per-projector", o->per_projector, "one pass per live projector (combined_live_passes off)");

@@ -19,7 +19,8 @@ std::string RendererOptions::Check() const {
   if (!std::isfinite(retention_turn_deg) || retention_turn_deg <= 0) return "retention_turn_deg must be finite and > 0";
   if (!std::isfinite(retention_move_m) || retention_move_m <= 0) return "retention_move_m must be finite and > 0";
   if (!std::isfinite(sky_radius_m) || sky_radius_m < 0) return "sky_radius_m must be finite and >= 0";
-  if (!(moving_view_scale >= 1 && moving_view_scale <= 4)) return "moving_view_scale must be in 1..4";
+  if (!(moving_view_scale >= 1 && moving_view_scale <= kMaxMovingViewScale)) return "moving_view_scale must be in 1..4";
+  if (moving_view_cameras < 1) return "moving_view_cameras must be >= 1";
   if (view_cache_entries < 1 || view_cache_entries > kMaxViewCacheEntries) {
     return "view_cache_entries must be in 1.." + std::to_string(kMaxViewCacheEntries);
   }

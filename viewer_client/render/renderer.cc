@@ -1685,12 +1685,11 @@ struct Renderer::Impl {
   }
 
   // The working G-buffer of a view, then its projector passes and resolve: the full frame.
-  // reduced (RendererOptions::moving_view_scale > 1): drawn at that fraction of the viewport and
-  // scaled up in the resolve; the view's slot records it for ReadLinearDepth.
+  // scale > 1 (a moving view, MovingViewScale): drawn at that fraction of the viewport's width and
+  // height and scaled up in the resolve; the view's slot records it for ReadLinearDepth.
   void DrawViewExact(const View& view, const std::vector<ProjectorPass>& passes, const std::vector<char>& visible,
-                     bool any_live, bool any_retained, GLuint target, bool reduced = false) {
+                     bool any_live, bool any_retained, GLuint target, double scale = 1) {
     View drawn = view;
-    const double scale = reduced ? options.moving_view_scale : 1.0;
     Viewport& d = drawn.viewport;
     d.width = std::max(1, static_cast<int>(std::ceil(view.viewport.width / scale)));
     d.height = std::max(1, static_cast<int>(std::ceil(view.viewport.height / scale)));
@@ -1709,6 +1708,17 @@ struct Renderer::Impl {
     if (smaller) ++stats.views_reduced;
   }
 
+  // RendererOptions::moving_view_scale, and more where the view sees more live cameras than
+  // moving_view_cameras (the per-pixel work grows with them): up to kMaxMovingViewScale.
+  double MovingViewScale(const std::vector<ProjectorPass>& passes, const std::vector<char>& visible) const {
+    if (options.moving_view_scale <= 1) return 1;  // full resolution always
+    int live = 0;
+    for (size_t k = 0; k < passes.size(); ++k) live += visible[k] && !passes[k].retained;
+    const double scale =
+        options.moving_view_scale * std::sqrt(std::max(1.0, static_cast<double>(live) / options.moving_view_cameras));
+    return std::min(scale, std::max(options.moving_view_scale, kMaxMovingViewScale));
+  }
+
   // A still view: its cache resolved against the current video, then the rectangles dynamic
   // models touch drawn exactly over it. The cache is rebuilt when its signature changed and the
   // view's inputs were the same in the previous frame (or there was none); while they change from
@@ -1724,7 +1734,7 @@ struct Renderer::Impl {
     cache.last_signature = signature;
     if ((!cache.valid || cache.signature != signature) && !still) {
       cache.valid = false;
-      DrawViewExact(view, passes, visible, any_live, any_retained, target, /*reduced=*/true);
+      DrawViewExact(view, passes, visible, any_live, any_retained, target, MovingViewScale(passes, visible));
       return;
     }
     if (!cache.valid || cache.signature != signature) {

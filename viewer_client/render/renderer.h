@@ -60,6 +60,7 @@ namespace ave::viewer {
 // Live projectors are layers of one video texture array and one shadow-map array; SetProjectors
 // rejects more than this.
 inline constexpr int kMaxProjectors = 64;
+inline constexpr double kMaxMovingViewScale = 4;  // RendererOptions::moving_view_cameras
 
 // Where several cameras see the same surface point.
 enum class OverlapPolicy {
@@ -217,6 +218,11 @@ struct RendererOptions {
   // first frame its inputs stay the same is drawn at full resolution (the cache build). 1: full
   // resolution always. Lines are drawn at full resolution.
   double moving_view_scale = 2;
+  // A moving view that sees more live cameras than this is reduced further, by the square root of
+  // the excess (its per-pixel work grows with the cameras), up to kMaxMovingViewScale: with 50
+  // cameras a flying browse view stays interactive, and is sharp again when it stops. A large
+  // value: moving_view_scale alone.
+  int moving_view_cameras = 8;
   DisplayOptions display;
 
   // Empty when usable; otherwise names the first bad field.

@@ -1215,6 +1215,53 @@ TEST_F(ViewCacheTest, MoverShadowsMatchExactWithMoreCamerasThanEntries) {
   EXPECT_GT(after.view_cache_shadow_tests, built.view_cache_shadow_tests);
 }
 
+// A moving view that sees more live cameras than moving_view_cameras is reduced further: the
+// linear depth read back shows it (one value per block of scale x scale pixels on the ground: equal
+// vertical neighbours 1/2 of the time at half resolution, 3/4 at a quarter).
+TEST_F(SceneTest, MovingView_ReducedFurtherWhenItSeesManyCameras) {
+  auto equal_neighbours = [&](int moving_view_cameras) {
+    RendererOptions options;
+    options.moving_view_cameras = moving_view_cameras;
+    absl::StatusOr<std::unique_ptr<Renderer>> r = Renderer::Create(options);
+    EXPECT_TRUE(r.ok()) << r.status();
+    EXPECT_TRUE((*r)->SetStaticMesh(mesh_).ok());
+    std::vector<Projector> projectors;
+    for (int k = 0; k < 4; ++k) {
+      projectors.push_back(MakeProjector(projector_, image_, 1));
+      projectors.back().camera_id = "cam" + std::to_string(k);
+    }
+    EXPECT_TRUE((*r)->SetProjectors(projectors).ok());
+    Camera moving = viewer_;
+    std::vector<float> depth;
+    for (int step = 0; step < 3; ++step) {
+      moving.world_from_camera.translation += Eigen::Vector3d(0.2, 0.1, 0);
+      const View view = MakeView(moving, {0, 0, kWidth, kHeight});
+      context_->BindFramebuffer();
+      EXPECT_TRUE((*r)->Render({view}, kWidth, kHeight).ok());
+      depth = *(*r)->ReadLinearDepth(view);
+    }
+    EXPECT_EQ((*r)->stats().views_reduced, 2u);
+    size_t equal = 0, pairs = 0;
+    for (int y = 0; y + 1 < kHeight; ++y) {  // vertical pairs (a level camera: depth is constant along rows)
+      for (int x = 0; x < kWidth; ++x) {
+        const float a = depth[y * kWidth + x], b = depth[(y + 1) * kWidth + x];
+        if (!std::isfinite(a) || !std::isfinite(b)) continue;
+        ++pairs;
+        equal += a == b;
+      }
+    }
+    return static_cast<double>(equal) / std::max<size_t>(1, pairs);
+  };
+  const double few = equal_neighbours(8), many = equal_neighbours(1);
+  EXPECT_GT(few, 0.4) << "half resolution";
+  std::printf("equal vertical neighbours: %.3f (threshold 8), %.3f (threshold 1)\n", few, many);
+  EXPECT_LT(few, 0.6) << "4 cameras, threshold 8: half resolution";
+  EXPECT_GT(many, 0.7) << "4 cameras, threshold 1: a quarter";
+  RendererOptions bad;
+  bad.moving_view_cameras = 0;
+  EXPECT_NE(bad.Check().find("moving_view_cameras"), std::string::npos);
+}
+
 // A view that moves every frame is drawn at half resolution (moving_view_scale 2) and scaled up;
 // the first frame it stays still is drawn in full (the cache build), as the exact renderer does.
 TEST_F(SceneTest, MovingView_DrawnAtReducedResolutionThenInFullWhenStill) {
