@@ -617,23 +617,6 @@ void AppendFrustumVolume(const Projector& p, const Bounds& scene, const ShadowSl
   AppendFrustumPiece(near_c, far_c, out);
 }
 
-// The part of a projector's frustum where its dynamic shadow map may differ from the static one:
-// the rectangle of the shadow map the models cover (ModelNdcRect of slot.dynamic_rect), from the nearest model corner to the end of the projector's volume. A surface point outside
-// it sees the projector past no model. 36 vertices; none when no model is in its map.
-void AppendShadowVolume(const Projector& p, const ShadowSlot& slot, const std::vector<Bounds>& models,
-                        const Bounds& scene, int shadow_map_size, std::vector<LineVertex>& out) {
-  if (!slot.dynamic_has_models) return;
-  double nearest = std::numeric_limits<double>::infinity();
-  for (const Bounds& b : models) {
-    for (const Eigen::Vector3d& c : b.Corners()) nearest = std::min(nearest, -(p.view * c.homogeneous()).z());
-  }
-  const double far_m = VolumeFarM(p, scene, slot);
-  const double near_m = std::clamp(nearest, p.near_m, far_m);
-  const Eigen::Vector4d ndc = ModelNdcRect(p, slot.dynamic_rect, shadow_map_size);
-  const Eigen::Matrix4d local_from_eye = p.view.inverse(), eye_from_clip = p.projection.inverse();
-  AppendFrustumPiece(FrustumCorners(local_from_eye, eye_from_clip, ndc, near_m),
-                     FrustumCorners(local_from_eye, eye_from_clip, ndc, far_m), out);
-}
 
 // False when all eight corners lie outside one clip plane of the view (the volume cannot show).
 bool VolumeMayBeVisible(const std::array<Eigen::Vector3d, 8>& corners, const Eigen::Matrix4d& clip_from_local) {
@@ -825,6 +808,35 @@ std::optional<Viewport> ScreenRect(const std::vector<Eigen::Vector4d>& points, c
   const int iy1 = static_cast<int>(std::min<double>(viewport.y + viewport.height, std::ceil(y1)));
   if (ix1 <= ix0 || iy1 <= iy0) return std::nullopt;
   return Viewport{ix0, iy0, ix1 - ix0, iy1 - iy0};
+}
+
+// The parts of a projector's frustum where its dynamic shadow map may differ from the static one:
+// per model in its view, the rectangle of the shadow map the model covers (ModelNdcRect), from the
+// model's nearest corner to the end of the projector's volume. A surface point outside them sees
+// the projector past no model. 36 vertices per model.
+void AppendShadowVolumes(const Projector& p, const ShadowSlot& slot, const std::vector<Bounds>& models,
+                         const Bounds& scene, int shadow_map_size, std::vector<LineVertex>& out) {
+  if (!slot.dynamic_has_models) return;
+  const Eigen::Matrix4d shadow_clip = MakeProjectorGl(p, shadow_map_size).shadow_projection * p.view;
+  const Eigen::Matrix4d local_from_eye = p.view.inverse(), eye_from_clip = p.projection.inverse();
+  const double far_m = VolumeFarM(p, scene, slot);
+  const Viewport map{0, 0, shadow_map_size, shadow_map_size};
+  for (const Bounds& b : models) {
+    const std::array<Eigen::Vector3d, 8> corners = b.Corners();
+    if (!VolumeMayBeVisible(corners, shadow_clip)) continue;
+    std::vector<Eigen::Vector4d> points;
+    double nearest = std::numeric_limits<double>::infinity();
+    for (const Eigen::Vector3d& c : corners) {
+      points.push_back(c.homogeneous());
+      nearest = std::min(nearest, -(p.view * c.homogeneous()).z());
+    }
+    const std::optional<Viewport> rect = ScreenRect(points, shadow_clip, map);
+    if (!rect) continue;
+    const Eigen::Vector4d ndc = ModelNdcRect(p, *rect, shadow_map_size);
+    const double near_m = std::clamp(nearest, p.near_m, far_m);
+    AppendFrustumPiece(FrustumCorners(local_from_eye, eye_from_clip, ndc, near_m),
+                       FrustumCorners(local_from_eye, eye_from_clip, ndc, far_m), out);
+  }
 }
 
 // What a view's cached G-buffer and mapping were built from (exact comparison: any change rebuilds).
@@ -2174,8 +2186,8 @@ absl::Status Renderer::Render(const std::vector<View>& views, int framebuffer_wi
   if (d.options.dynamic_objects_cast_shadows) {
     for (const ProjectorPass& pass : passes) {
       if (pass.retained) continue;
-      AppendShadowVolume(*pass.projector, d.slots[pass.layer].shadow, d.model_bounds, scene, d.options.shadow_map_size,
-                         volume_vertices);
+      AppendShadowVolumes(*pass.projector, d.slots[pass.layer].shadow, d.model_bounds, scene,
+                          d.options.shadow_map_size, volume_vertices);
     }
   }
   d.shadow_volume_count = static_cast<GLsizei>(volume_vertices.size()) - d.shadow_volume_first;
