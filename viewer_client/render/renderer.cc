@@ -845,6 +845,10 @@ struct ViewCache {
   Viewport viewport;
   std::vector<double> signature;
   std::vector<double> last_signature;  // of the view's previous frame, cached or not
+  // The static G-buffer in the cache textures (under `viewport`) was drawn for these view inputs
+  // (StaticSignature): still usable when only projectors changed and the mapping is not.
+  std::vector<double> static_signature;
+  bool static_valid = false;
   double built_s = 0;  // Now() when the retained targets were drawn
   bool any_live = false, any_retained = false;
   std::vector<Viewport> patches;  // rectangles drawn exactly in the last frame (working G-buffer)
@@ -1590,15 +1594,7 @@ struct Renderer::Impl {
   // (drawn exactly on top), nor the retained fade (scaled in the resolve).
   std::vector<double> CacheSignature(const View& view, const std::vector<ProjectorPass>& passes,
                                      const std::vector<char>& visible) const {
-    std::vector<double> sig;
-    const Viewport& v = view.viewport;
-    const DisplayOptions& display = options.display;
-    sig.insert(sig.end(), {double(target_width), double(target_height), double(v.x), double(v.y), double(v.width),
-                           double(v.height), double(static_version), double(static_cast<int>(display.overlap)),
-                           display.seam_feather, display.retention_half_life_s, double(display.sky)});
-    sig.insert(sig.end(), view.clear_color.data(), view.clear_color.data() + 3);
-    AppendMatrix(view.view, sig);
-    AppendMatrix(view.projection, sig);
+    std::vector<double> sig = StaticSignature(view);
     for (size_t k = 0; k < passes.size(); ++k) {
       if (!visible[k]) continue;
       const ProjectorPass& pass = passes[k];
@@ -1613,6 +1609,21 @@ struct Renderer::Impl {
     return sig;
   }
 
+  // The part of CacheSignature that is the view's own (what its static G-buffer depends on, and
+  // the display options).
+  std::vector<double> StaticSignature(const View& view) const {
+    std::vector<double> sig;
+    const Viewport& v = view.viewport;
+    const DisplayOptions& display = options.display;
+    sig.insert(sig.end(), {double(target_width), double(target_height), double(v.x), double(v.y), double(v.width),
+                           double(v.height), double(static_version), double(static_cast<int>(display.overlap)),
+                           display.seam_feather, display.retention_half_life_s, double(display.sky)});
+    sig.insert(sig.end(), view.clear_color.data(), view.clear_color.data() + 3);
+    AppendMatrix(view.view, sig);
+    AppendMatrix(view.projection, sig);
+    return sig;
+  }
+
   // Draws a still view's cache: the static G-buffer, the mapping of the live passes (image
   // load/store, a barrier between projectors) and the retained accumulation.
   void BuildViewCache(const View& view, const std::vector<ProjectorPass>& passes, const std::vector<char>& visible,
@@ -1623,6 +1634,8 @@ struct Renderer::Impl {
     glClearDepth(1.0);
     glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
     DrawGbuffer(view, /*with_static=*/true, /*with_dynamic=*/false);
+    cache.static_signature = StaticSignature(view);
+    cache.static_valid = true;
     glBindFramebuffer(GL_FRAMEBUFFER, fbo_mapping);
     ApplyPassState(Pass::kGbuffer);
     if (cache.any_live) glClear(GL_COLOR_BUFFER_BIT);
@@ -1699,8 +1712,11 @@ struct Renderer::Impl {
   // The working G-buffer of a view, then its projector passes and resolve: the full frame.
   // scale > 1 (a moving view, MovingViewScale): drawn at that fraction of the viewport's width and
   // height and scaled up in the resolve; the view's slot records it for ReadLinearDepth.
+  // static_from_cache: the view's static G-buffer is taken (scaled, nearest) from its view cache
+  // instead of drawn: only projectors changed (a turning camera), the view did not.
   void DrawViewExact(const View& view, const std::vector<ProjectorPass>& passes, const std::vector<char>& visible,
-                     bool any_live, bool any_retained, GLuint target, double scale = 1) {
+                     bool any_live, bool any_retained, GLuint target, double scale = 1,
+                     bool static_from_cache = false) {
     View drawn = view;
     Viewport& d = drawn.viewport;
     d.width = std::max(1, static_cast<int>(std::ceil(view.viewport.width / scale)));
@@ -1710,14 +1726,40 @@ struct Renderer::Impl {
     glScissor(d.x, d.y, d.width, d.height);
     glBindFramebuffer(GL_FRAMEBUFFER, fbo_gbuffer);
     ApplyPassState(Pass::kGbuffer);
-    glClearColor(0, 0, 0, 0);
-    glClearDepth(1.0);
-    glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
-    DrawGbuffer(drawn, /*with_static=*/true, /*with_dynamic=*/true);
+    if (static_from_cache) {
+      CopyCachedGbuffer(view.viewport, d);
+      ++stats.views_static_from_cache;
+    } else {
+      glClearColor(0, 0, 0, 0);
+      glClearDepth(1.0);
+      glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+    }
+    DrawGbuffer(drawn, /*with_static=*/!static_from_cache, /*with_dynamic=*/true);
     AccumulateAndResolve(drawn, passes, visible, any_live, any_retained, target, smaller ? &view : nullptr);
     if (smaller) reduced_views.push_back({view.viewport, d});
     ++stats.views_uncached;
     if (smaller) ++stats.views_reduced;
+  }
+
+  // The view cache's static G-buffer under `from` into the working G-buffer under `to` (the same
+  // corner, maybe smaller: nearest), colour, normal and depth; leaves the working G-buffer bound.
+  void CopyCachedGbuffer(const Viewport& from, const Viewport& to) {
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, fbo_cache_gbuffer);
+    glBindFramebuffer(GL_DRAW_FRAMEBUFFER, fbo_gbuffer);
+    for (GLenum attachment : {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1}) {
+      glReadBuffer(attachment);
+      const GLenum one[] = {attachment == GL_COLOR_ATTACHMENT0 ? attachment : GLenum{GL_NONE},
+                            attachment == GL_COLOR_ATTACHMENT1 ? attachment : GLenum{GL_NONE}};
+      glDrawBuffers(2, one);
+      glBlitFramebuffer(from.x, from.y, from.x + from.width, from.y + from.height, to.x, to.y, to.x + to.width,
+                        to.y + to.height, GL_COLOR_BUFFER_BIT, GL_NEAREST);
+    }
+    glBlitFramebuffer(from.x, from.y, from.x + from.width, from.y + from.height, to.x, to.y, to.x + to.width,
+                      to.y + to.height, GL_DEPTH_BUFFER_BIT, GL_NEAREST);
+    const GLenum both[] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1};
+    glDrawBuffers(2, both);
+    glReadBuffer(GL_COLOR_ATTACHMENT0);
+    glBindFramebuffer(GL_FRAMEBUFFER, fbo_gbuffer);
   }
 
   // RendererOptions::moving_view_scale, and more where the view sees more live cameras than
@@ -1745,14 +1787,19 @@ struct Renderer::Impl {
     const bool still = cache.last_signature.empty() || cache.last_signature == signature;
     cache.last_signature = signature;
     if ((!cache.valid || cache.signature != signature) && !still) {
+      // Only projectors changed (a camera turning): the cached static G-buffer still holds.
+      const bool static_kept = cache.static_valid && cache.static_signature == StaticSignature(view);
       cache.valid = false;
-      DrawViewExact(view, passes, visible, any_live, any_retained, target, MovingViewScale(passes, visible));
+      DrawViewExact(view, passes, visible, any_live, any_retained, target, MovingViewScale(passes, visible),
+                    static_kept);
       return;
     }
     if (!cache.valid || cache.signature != signature) {
       // The cache textures are shared: another slot's cache under this viewport is lost.
       for (size_t k = 0; k < view_caches.size(); ++k) {
-        if (k != slot && Overlap(view_caches[k].viewport, view.viewport)) view_caches[k].valid = false;
+        if (k != slot && Overlap(view_caches[k].viewport, view.viewport)) {
+          view_caches[k].valid = view_caches[k].static_valid = false;
+        }
       }
       cache.valid = true;
       cache.viewport = view.viewport;

@@ -254,6 +254,8 @@ struct RenderStats {
   // the view's previous frame (the cache is built on the first frame they stay the same).
   uint64_t views_uncached = 0;
   uint64_t views_reduced = 0;  // of those, drawn at reduced resolution (RendererOptions::moving_view_scale)
+  // Views drawn in full whose static G-buffer came from their cache (only projectors changed).
+  uint64_t views_static_from_cache = 0;
 };
 
 // Most live projector entries the view cache keeps per pixel (RendererOptions::view_cache_entries).

@@ -1178,6 +1178,43 @@ TEST_F(ViewCacheTest, CachedFramesEqualExactOnesAcrossPoliciesLensesRetentionAnd
   Step([](Renderer& r) { return r.SetDynamicObjects({}); }, "movers gone");
 }
 
+// A camera turning while the view stays: the view is drawn in full each frame, its static
+// G-buffer copied from its cache instead of drawn; with a box moving too, each frame must equal
+// the exact renderer's (moving views at full resolution here, so the copy is one to one).
+TEST_F(ViewCacheTest, TurningCameraReusesTheViewsStaticGbuffer) {
+  const Camera near_cam{PinholeIntrinsics::FromFov(640, 480, 70), LookAt({-12, 10, 6}, {-10, 6, 0})};
+  const std::vector<uint8_t> gradient = GradientImage(640, 480);
+  Projector a = MakeProjector(near_cam, gradient, 1);
+  a.camera_id = "near";
+  auto set = [&](double yaw_deg) {
+    Camera turned = projector_;
+    turned.world_from_camera.rotation =
+        Eigen::Quaterniond(Eigen::AngleAxisd(yaw_deg * M_PI / 180, Eigen::Vector3d::UnitZ())) *
+        projector_.world_from_camera.rotation;
+    const std::vector<Projector> ps = {a, MakeProjector(turned, image_, 1)};
+    return [ps](Renderer& r) { return r.SetProjectors(ps); };
+  };
+  Step(set(0), "two projectors");
+  Step(set(0), "still: built");
+  const RenderStats built = renderer_->stats();
+  for (int f = 1; f <= 3; ++f) {
+    const double x = -10.0 + f;
+    auto turn = set(-2.0 * f);
+    Step(
+        [x, turn](Renderer& r) {
+          if (absl::Status s = r.SetDynamicObjects({DynamicBox{{x, 6, 0}, 0.3, {1, 1, 3}, {0.2f, 0.8f, 0.2f}}});
+              !s.ok()) {
+            return s;
+          }
+          return turn(r);
+        },
+        "turning with a box moving, frame " + std::to_string(f));
+  }
+  const RenderStats after = renderer_->stats();
+  EXPECT_GE(after.views_static_from_cache, built.views_static_from_cache + 3);
+  EXPECT_EQ(after.view_cache_builds, built.view_cache_builds) << "the turn rebuilds nothing";
+}
+
 // More live cameras in the view than a pixel keeps entries (5 > 4): the models' shadow test first
 // keeps the pixels with an entry the box may hide (the entries pass), then tests them. No pixel
 // sees more than 3 of the cameras, so the cached picture must still equal the exact one.
