@@ -559,7 +559,9 @@ absl::Status RunViewer(const ViewerOptions& options) {
                     << (*renderer)->stats().dynamic_shadow_updates << " dynamic shadow updates, "
                     << (*renderer)->stats().video_uploads << " video uploads, view cache: "
                     << (*renderer)->stats().view_cache_builds << " builds, " << (*renderer)->stats().view_cache_hits
-                    << " hits, " << (*renderer)->stats().views_uncached << " uncached views";
+                    << " hits, " << (*renderer)->stats().view_cache_shadow_tests << " shadow-tested, "
+                    << (*renderer)->stats().views_uncached << " uncached views ("
+                    << (*renderer)->stats().views_static_from_cache << " with the cached static G-buffer)";
     }
     if (!options.snapshot_path.empty()) {
       if (absl::Status s = SaveFramebuffer(*context, options.snapshot_path); !s.ok()) return s;
