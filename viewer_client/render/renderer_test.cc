@@ -1215,6 +1215,34 @@ TEST_F(ViewCacheTest, TurningCameraReusesTheViewsStaticGbuffer) {
   EXPECT_EQ(after.view_cache_builds, built.view_cache_builds) << "the turn rebuilds nothing";
 }
 
+// Hard case for the shadow volumes: a model around a camera's eye (the person carrying the
+// backpack camera), its corners behind the camera, so its shadow-map rectangle is the whole map and
+// its volume starts at the near plane; and a model far off to the side of every frustum. Cached
+// frames must still equal exact ones.
+TEST_F(ViewCacheTest, ModelAroundACameraEyeMatchesExact) {
+  const Camera near_cam{PinholeIntrinsics::FromFov(640, 480, 70), LookAt({-12, 10, 6}, {-10, 6, 0})};
+  const std::vector<uint8_t> gradient = GradientImage(640, 480);  // outlives the projectors' spans
+  Projector a = MakeProjector(near_cam, gradient, 1);
+  a.camera_id = "near";
+  const std::vector<Projector> ps = {a, MakeProjector(projector_, image_, 1)};
+  auto set = [ps](Renderer& r) { return r.SetProjectors(ps); };
+  Step(set, "two projectors");
+  Step(set, "still: built");
+  const RenderStats built = renderer_->stats();
+  for (double dz : {-0.5, 0.0, 0.5}) {
+    Step(
+        [dz](Renderer& r) {
+          return r.SetDynamicObjects({DynamicBox{{-12, 10, 5 + dz}, 0.0, {1.2, 1.2, 2}, {0.8f, 0.2f, 0.2f}},
+                                      DynamicBox{{-9, 6, 0}, 0.3, {1, 1, 3}, {0.2f, 0.8f, 0.2f}},
+                                      DynamicBox{{500, -500, 0}, 0.3, {1, 1, 2}, {0.2f, 0.2f, 0.8f}}});
+        },
+        "box around the near camera's eye, z offset " + std::to_string(dz));
+  }
+  // The far model grows the scene box the projector volumes are cut to: one rebuild, then hits.
+  EXPECT_LE(renderer_->stats().view_cache_builds, built.view_cache_builds + 1);
+  EXPECT_GT(renderer_->stats().view_cache_shadow_tests, built.view_cache_shadow_tests);
+}
+
 // More live cameras in the view than a pixel keeps entries (5 > 4): the models' shadow test first
 // keeps the pixels with an entry the box may hide (the entries pass), then tests them. No pixel
 // sees more than 3 of the cameras, so the cached picture must still equal the exact one.
