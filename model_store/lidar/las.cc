@@ -275,6 +275,11 @@ absl::StatusOr<PointCloud> ParseLas(std::string_view bytes, const std::string& n
     if (centre.allFinite()) origin_units = centre;
   }
   cloud.origin = origin_units.cwiseProduct(unit);
+  if (!cloud.origin.allFinite()) {
+    // A finite header offset or bounds centre times a linear unit can still overflow.
+    return absl::InvalidArgumentError(name + ": the local origin (header offset or bounds centre x linear unit " +
+                                      std::to_string(unit_xy) + ") is not finite");
+  }
   // world - origin = (X * scale + (offset - origin)) * unit: no two large numbers meet.
   const Eigen::Vector3d shift = info.offset - origin_units;
 

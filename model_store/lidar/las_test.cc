@@ -180,5 +180,15 @@ TEST(LasErrors, ZeroScaleAndBadSignature) {
   EXPECT_THAT(std::string(ReadLas("/nonexistent/x.las").status().message()), HasSubstr("/nonexistent/x.las"));
 }
 
+// Found by the fuzzer: finite header fields whose origin overflows once scaled by the linear unit
+// are refused with the file's name, not accepted with an infinite origin.
+TEST(LasErrors, OriginThatOverflowsIsRefused) {
+  LasReadOptions options;
+  options.unit_to_metres = 1e305;  // x offset ~5e5 units: 5e310 m
+  const absl::Status s = ParseLas(GoodFile(), "huge.las", options).status();
+  EXPECT_FALSE(s.ok());
+  EXPECT_THAT(std::string(s.message()), HasSubstr("huge.las: the local origin"));
+}
+
 }  // namespace
 }  // namespace ave::model
