@@ -10,12 +10,14 @@
 // `world_from_sensor` places it in the site's local ENU frame (metres, relative to the static
 // model's double origin); a sensor may be tilted, so nothing downstream assumes z_sensor = up.
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <utility>
 #include <vector>
 
 #include <Eigen/Core>
 
+#include "absl/status/statusor.h"
 #include "model_store/geometry/rigid3.h"
 
 namespace ave::lidar {
@@ -62,6 +64,14 @@ struct FootTracks {
   int64_t t_ns = 0;
   Rigid3d world_from_ground;
   std::vector<FootTrack> tracks;
+  // Per point of the sweep these came from (same order): the id of the person it belongs to, 0 for
+  // background or unassigned foreground (i4D §3.2, back-projection from the foot blob). Empty when
+  // the tracker did not label points.
+  std::vector<uint32_t> point_track_id;
 };
+
+// What turns sweeps into tracks, online (one call per sweep, in order). The agent's LiDAR mode and
+// the streamer take one of these, so they do not depend on the tracker's implementation.
+using SweepTracker = std::function<absl::StatusOr<FootTracks>(const LidarSweep&)>;
 
 }  // namespace ave::lidar
