@@ -212,8 +212,17 @@ TEST_F(EndToEnd, VideoLandsWhereCameraOneSeesAndNotBehindBuildings) {
       if (c.id == id) return c.frame_sequence;
     return uint64_t{0};
   };
-  // cam3's last frame as the server holds it once its agent has gone (frames may still be in
-  // flight to the viewer at this moment; the viewer must end on exactly this one).
+  // cam3's last frame as the server finally holds it. The agent cancels its stream when stopped, so
+  // a frame it sent may still be in the server's handler after the agent's thread has joined: wait
+  // (on the state's change counter) until the server has closed cam3's stream, which happens after
+  // its last AcceptFrame. Then the viewer must end on exactly that frame.
+  const auto closed_by = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  for (;;) {
+    const uint64_t version = server_->state().version();
+    if (server_->state().OpenStreams("cam3") == 0) break;
+    ASSERT_LT(std::chrono::steady_clock::now(), closed_by) << "the server never closed cam3's stream";
+    server_->state().WaitForChange(version, std::chrono::milliseconds(500));
+  }
   ASSERT_NE(server_->state().LatestFrame("cam3"), nullptr);
   const uint64_t s3 = server_->state().LatestFrame("cam3")->sequence();
   const uint64_t s1 = seq("cam1"), s2 = seq("cam2");
