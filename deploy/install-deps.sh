@@ -24,6 +24,8 @@ PACKAGES=(
   libcli11-dev nlohmann-json3-dev libyaml-cpp-dev
   # tests and benchmarks; clang + its runtime for the libFuzzer targets (deploy/fuzz.sh)
   libgtest-dev libgmock-dev libbenchmark-dev clang-14 libclang-rt-14-dev
+  # CPU load beside the repeated end-to-end tests (deploy/test.sh, docs/RELIABILITY.md)
+  stress-ng
 )
 
 missing=()
