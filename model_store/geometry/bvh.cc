@@ -89,7 +89,7 @@ inline double EnterBox(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, con
 }  // namespace
 
 std::optional<RayHit> MeshBvh::Raycast(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction, double min_distance_m,
-                                       double max_distance_m) const {
+                                       double max_distance_m, Work* work) const {
   const double len = direction.norm();
   if (nodes_.empty() || !(len > 0) || !std::isfinite(len) || !origin.allFinite()) return std::nullopt;
   const Eigen::Vector3d d = direction / len;
@@ -104,6 +104,10 @@ std::optional<RayHit> MeshBvh::Raycast(const Eigen::Vector3d& origin, const Eige
   stack[top++] = 0;
   while (top > 0) {
     const Node& node = nodes_[stack[--top]];
+    if (work) {
+      ++work->nodes_visited;
+      work->triangles_tested += node.count;
+    }
     if (node.count > 0) {
       // Möller–Trumbore in double, exactly as RaycastMesh (same grazing threshold).
       for (uint32_t i = node.first; i < node.first + node.count; ++i) {

@@ -29,8 +29,14 @@ class MeshBvh {
   // along the normalised direction, grazing (parallel) triangles never hit, a zero or non-finite
   // direction or origin never hits. The triangle index is the mesh's. On exact ties in distance
   // the lower triangle index wins (RaycastMesh keeps the later one; distances agree).
+  // The work one or more casts did, added to when passed to Raycast: what makes the hierarchy pay,
+  // counted rather than timed (a timed assertion fails on a loaded machine).
+  struct Work {
+    uint64_t nodes_visited = 0;
+    uint64_t triangles_tested = 0;
+  };
   std::optional<RayHit> Raycast(const Eigen::Vector3d& origin_local, const Eigen::Vector3d& direction,
-                                double min_distance_m = 1e-4, double max_distance_m = 1e9) const;
+                                double min_distance_m = 1e-4, double max_distance_m = 1e9, Work* work = nullptr) const;
 
   size_t TriangleCount() const { return triangles_.size(); }
   size_t NodeCount() const { return nodes_.size(); }

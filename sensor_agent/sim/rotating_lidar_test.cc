@@ -224,7 +224,9 @@ TEST(RotatingLidar, EachEffectChangesOnlyWhatItShould) {
   }
 }
 
-TEST(RotatingLidar, FrameIsFastEnough) {
+// Prints the cost of a full frame; the figure that counts comes from ave-bench, not from a timed
+// assertion (which fails on a loaded machine, issue 14).
+TEST(RotatingLidar, FullFrameCastsEveryRay) {
   const scene::SyntheticCampus site = testing::CourtyardSite();
   RotatingLidarSpec spec = SmallSpec();
   spec.azimuth_steps = 1024;  // the full 64 x 1024 = 65,536 rays
@@ -234,7 +236,10 @@ TEST(RotatingLidar, FrameIsFastEnough) {
   const auto t1 = std::chrono::steady_clock::now();
   const double ms = std::chrono::duration<double, std::milli>(t1 - t0).count();
   std::printf("rotating lidar 64x1024 frame incl. BVH build: %.1f ms, %zu points\n", ms, frame.points.size());
-  EXPECT_LT(ms, 1000);
+  // Most of the 65,536 rays meet the courtyard's ground or walls within range (none are dropped
+  // without lidar_missing_returns); the upper rings look over the walls into the sky.
+  EXPECT_GT(frame.points.size(), 65536u / 2);
+  EXPECT_LE(frame.points.size(), 65536u);
 }
 
 // ---- a small Velodyne pcap decoder: what the real-sensor reader will have to do ----
