@@ -64,7 +64,7 @@ std::string ServerMetrics::RenderPrometheus() const {
   gauge("ave_flow_saturated", "1 while sensors are asked for a lower rate or quality.", saturated);
   gauge("ave_insecure_plaintext", "1 while serving plaintext on a non-loopback address (--insecure-plaintext).",
         insecure_plaintext);
-  gauge("ave_auth_tracked_peers", "Peers tracked by the failed-authentication limiter.", auth_tracked_peers);
+  gauge("ave_auth_tracked_peers", "Peers tracked by the failed-authentication limiter (as of the last failure).", auth_tracked_peers);
   capture_to_ingest_s.Render("ave_capture_to_ingest_seconds", "Capture (server clock) to acceptance.", out);
   ingest_to_send_s.Render("ave_ingest_to_send_seconds", "Acceptance to the write to a viewer.", out);
   capture_to_send_s.Render("ave_capture_to_send_seconds", "Capture (server clock) to the write to a viewer.", out);
