@@ -39,12 +39,20 @@ int main(int argc, char** argv) {
   app.add_option("--tls-key", options.tls.key_file, "PEM server private key (env AVE_TLS_KEY)");
   app.add_option("--tls-client-ca", options.tls.client_ca_file,
                  "PEM CA for client certificates: enables mutual TLS for clients that present one");
+  app.add_flag("--insecure-plaintext", options.tls.insecure_plaintext,
+               "serve plaintext on a non-loopback --listen address (tokens cross the network in clear; "
+               "warned about every minute)");
   app.add_flag("--require-client-cert", options.tls.require_client_cert,
                "refuse TLS handshakes without a client certificate (every client)");
   app.add_flag("--sensor-client-cert", options.sensor_requires_client_cert,
                "sensors must present a verified client certificate (mutual TLS for sensor nodes)");
   app.add_option("--metrics-listen", options.metrics_listen,
                  "host:port for Prometheus text metrics over HTTP (GET /metrics); empty = off");
+  double auth_window_s = options.auth_limit.window_ns / 1e9;
+  app.add_option("--auth-max-failures", options.auth_limit.max_failures,
+                 "failed authentications a peer address may make per window before its calls are refused (0 = no limit)")
+      ->capture_default_str()->check(CLI::Range(0, 1000000));
+  app.add_option("--auth-window", auth_window_s, "that window, seconds")->capture_default_str()->check(CLI::Range(1.0, 86400.0));
   app.add_option("--max-ingest-fps", options.flow.max_ingest_fps,
                  "server-wide frame budget: sensors are asked to share it (0 = unlimited)")->capture_default_str();
   app.add_option("--max-ingest-mbps", options.flow.max_ingest_mbps,
@@ -62,6 +70,7 @@ int main(int argc, char** argv) {
                          : log_level == "error"   ? ave::log::Level::kERROR
                                                   : ave::log::Level::kINFO;
   options.frame_limits.max_jpeg_bytes = static_cast<size_t>(max_frame_mb * (1 << 20));
+  options.auth_limit.window_ns = static_cast<int64_t>(auth_window_s * 1e9);
 
   // Signals are taken by a waiting thread, so shutdown runs outside any signal handler.
   sigset_t signals;

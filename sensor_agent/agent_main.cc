@@ -73,6 +73,8 @@ int main(int argc, char** argv) {
   app.add_option("--tls-cert", options.tls.cert_file, "PEM client certificate of this sensor node (mutual TLS)");
   app.add_option("--tls-key", options.tls.key_file, "PEM client key of this sensor node (mutual TLS)");
   app.add_option("--tls-server-name", options.tls.server_name, "name the server certificate carries, if not the host dialled");
+  app.add_flag("--insecure-plaintext", options.tls.insecure_plaintext,
+               "send the sensor token in plaintext to a non-loopback server (without --tls-ca)");
   app.add_option("--spill", options.spill_path,
                  "file for metadata buffered during long outages (default: temp dir; '-' = memory only)");
   app.add_option("--metadata-buffer", options.metadata_in_memory, "metadata records kept in memory during an outage")

@@ -24,6 +24,29 @@ out=$("$bin/ave-agent" --camera c --source ftp://x 2>&1); rc=$?
 if [ $rc -eq 0 ] || ! grep -q "unknown scheme" <<<"$out"; then echo "FAIL ave-agent bad source: rc=$rc $out"; fail=1; fi
 out=$("$bin/ave-server" --listen 127.0.0.1:0 --store /nonexistent-dir/x.db --admin-token t 2>&1); rc=$?
 if [ $rc -eq 0 ] || ! grep -q "/nonexistent-dir/x.db" <<<"$out"; then echo "FAIL ave-server bad store: rc=$rc $out"; fail=1; fi
+# Issue 14: no bearer token in plaintext off loopback unless --insecure-plaintext says so. The
+# server refuses a wildcard address without TLS in one line naming both ways out; each client
+# refuses a plaintext non-loopback target, naming it, before it connects.
+"$bin/ave-server" --listen 0.0.0.0:0 --store /tmp/ave_cli_plain.$$.db --admin-token t >/dev/null 2>/tmp/ave_cli_err.$$; rc=$?
+if [ $rc -eq 0 ] || [ "$(wc -l </tmp/ave_cli_err.$$)" -ne 1 ] || ! grep -q -- "--insecure-plaintext" /tmp/ave_cli_err.$$ ||
+   ! grep -q -- "--tls-cert/--tls-key" /tmp/ave_cli_err.$$ || [ -e /tmp/ave_cli_plain.$$.db ]; then
+  echo "FAIL ave-server plaintext on 0.0.0.0: rc=$rc $(cat /tmp/ave_cli_err.$$)"; fail=1
+fi
+out=$("$bin/ave-admin" --server 10.255.1.2:50051 --token t list 2>&1); rc=$?
+if [ $rc -eq 0 ] || ! grep -q "10.255.1.2:50051" <<<"$out" || ! grep -q -- "--insecure-plaintext" <<<"$out"; then
+  echo "FAIL ave-admin plaintext to a non-loopback server: rc=$rc $out"; fail=1
+fi
+out=$("$bin/ave-agent" --server 10.255.1.2:50051 --camera c --source sim:campus#cam1 2>&1); rc=$?
+if [ $rc -eq 0 ] || ! grep -q "10.255.1.2:50051" <<<"$out" || ! grep -q -- "--insecure-plaintext" <<<"$out"; then
+  echo "FAIL ave-agent plaintext to a non-loopback server: rc=$rc $out"; fail=1
+fi
+out=$("$bin/ave-viewer" --server 10.255.1.2:50051 --headless --snapshot /tmp/ave_cli_v.png 2>&1); rc=$?
+if [ $rc -eq 0 ] || ! grep -q "10.255.1.2:50051" <<<"$out" || ! grep -q -- "--insecure-plaintext" <<<"$out"; then
+  echo "FAIL ave-viewer plaintext to a non-loopback server: rc=$rc $out"; fail=1
+fi
+out=$("$bin/ave-loadgen" --server 10.255.1.2:50051 2>&1); rc=$?
+if [ $rc -eq 0 ] || ! grep -q "10.255.1.2:50051" <<<"$out"; then echo "FAIL ave-loadgen non-loopback target: rc=$rc $out"; fail=1; fi
+rm -f /tmp/ave_cli_err.$$ /tmp/ave_cli_plain.$$.db
 out=$("$bin/ave-viewer" --headless 2>&1); rc=$?
 if [ $rc -ne 2 ] || ! grep -q -- "--snapshot" <<<"$out"; then echo "FAIL ave-viewer --headless without output: rc=$rc $out"; fail=1; fi
 out=$("$bin/ave-model" classify --input /nonexistent-dir/in.las --out /tmp/ave_cli_out.las 2>&1); rc=$?

@@ -2,7 +2,10 @@
 """The deploy files (systemd units, compose file, Kubernetes manifests, scaling guide) start our
 programs with flags; a renamed or mistyped flag would only show when someone deploys. Every
 `ave-<program> [subcommand] --flag` written in them must be a flag that program (or subcommand)
-lists in its --help. Usage: deploy_files_test.py REPO BIN_DIR"""
+lists in its --help. And no bearer token in clear (issue 14): an `ave-server --listen` on a
+non-loopback address carries --tls-cert (or says --insecure-plaintext), and a client given --server
+has a TLS CA (--tls-ca or AVE_TLS_CA in the same file) or says --insecure-plaintext.
+Usage: deploy_files_test.py REPO BIN_DIR"""
 import pathlib
 import re
 import subprocess
@@ -25,7 +28,15 @@ def help_text(program, sub):
         help_cache[key] = (run.returncode, run.stdout + run.stderr)
     return help_cache[key]
 
-failures, checked = [], 0
+def is_loopback(address):
+    address = address.strip('"\'')
+    if address.startswith("unix:"):
+        return True
+    host = address[1:address.find("]")] if address.startswith("[") else address.rsplit(":", 1)[0]
+    return host in ("localhost", "::1") or host.startswith("127.")
+
+
+failures, checked, transport_checked = [], 0, 0
 for path in files:
     if not path.is_file():
         continue
@@ -41,6 +52,16 @@ for path in files:
         flags = sorted(set(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", segment)))
         if not flags:
             continue
+        where = f"{path.relative_to(repo)}: ave-{program}"
+        listen = re.search(r"--listen[\s,=]+\"?([^\s\",\]]+)", segment)
+        if program == "server" and listen:
+            transport_checked += 1
+            if not is_loopback(listen.group(1)) and "--tls-cert" not in flags and "--insecure-plaintext" not in flags:
+                failures.append(f"{where} listens on {listen.group(1)} in plaintext (no --tls-cert, no --insecure-plaintext)")
+        if program in ("agent", "viewer", "admin") and "--server" in flags and path.suffix != ".md":  # not prose
+            transport_checked += 1
+            if "--tls-ca" not in flags and "AVE_TLS_CA" not in text and "--insecure-plaintext" not in flags:
+                failures.append(f"{where} sends its token to --server in plaintext (no --tls-ca / AVE_TLS_CA)")
         rc, help_out = help_text(program, sub)
         if rc != 0 and sub:  # the word was not a subcommand after all
             sub = None
@@ -55,8 +76,9 @@ for path in files:
 
 for f in failures:
     print("FAIL", f)
-print(f"deploy files: {checked} flags checked in {len(files)} files, {len(failures)} unknown")
-if checked < 10:
+print(f"deploy files: {checked} flags checked in {len(files)} files, {transport_checked} transports checked, "
+      f"{len(failures)} failures")
+if checked < 10 or transport_checked < 4:
     print("FAIL: too few flags found; the extractor is broken")
     sys.exit(1)
 sys.exit(1 if failures else 0)

@@ -41,6 +41,8 @@ int main(int argc, char** argv) {
   app.add_option("--tls-cert", options.tls_cert, "PEM client certificate (mutual TLS)");
   app.add_option("--tls-key", options.tls_key, "PEM client key (mutual TLS)");
   app.add_option("--tls-server-name", options.tls_server_name, "name the server certificate carries, if not the host dialled");
+  app.add_flag("--insecure-plaintext", options.insecure_plaintext,
+               "send the viewer token in plaintext to a non-loopback server (without --tls-ca)");
   app.add_option("--id", options.viewer_id, "this viewer's name in the server log")->capture_default_str();
   app.add_flag("--headless", options.headless, "render offscreen (EGL) and exit");
   app.add_option("--snapshot", options.snapshot_path, "PNG to write (headless: at the end; window: on 'p' and at close)");

@@ -60,13 +60,6 @@ struct Options {
   int quality = 80;
 };
 
-bool IsLoopback(const std::string& target) {
-  std::string host = target.substr(0, target.rfind(':'));
-  if (host.rfind("ipv4:", 0) == 0) host = host.substr(5);
-  if (host.size() > 2 && host.front() == '[' && host.back() == ']') host = host.substr(1, host.size() - 2);
-  return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;
-}
-
 // JPEGs with texture like a real scene (gradients, blocks, mild noise): ~40-60 KB at 640x480 q80.
 std::vector<std::string> MakeJpegs(int width, int height, int count, int quality) {
   std::vector<std::string> out;
@@ -301,7 +294,7 @@ int main(int argc, char** argv) {
     o.viewer_token = "v" + std::to_string(rng());
     o.admin_token = "a" + std::to_string(rng());
   } else {
-    if (!IsLoopback(o.server)) {
+    if (!ave::net::IsLoopbackAddress(o.server)) {
       std::cerr << "ave-loadgen: refusing non-loopback target '" << o.server << "' (load tests run on this host only)\n";
       return 2;
     }

@@ -42,6 +42,8 @@ int main(int argc, char** argv) {
   app.add_option("--tls-cert", tls.cert_file, "PEM client certificate (mutual TLS)");
   app.add_option("--tls-key", tls.key_file, "PEM client key (mutual TLS)");
   app.add_option("--tls-server-name", tls.server_name, "name the server certificate carries, if not the host dialled");
+  app.add_flag("--insecure-plaintext", tls.insecure_plaintext,
+               "send the admin token in plaintext to a non-loopback server (without --tls-ca)");
   app.require_subcommand(1);
 
   app.add_subcommand("list", "list registered cameras as JSON");

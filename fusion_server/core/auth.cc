@@ -1,5 +1,6 @@
 #include "fusion_server/core/auth.h"
 
+#include <openssl/crypto.h>
 #include <openssl/evp.h>
 #include <openssl/rand.h>
 
@@ -9,6 +10,7 @@ namespace ave {
 namespace {
 
 constexpr size_t kMaxTokenBytes = 4096;
+constexpr size_t kTokenIdChars = 12;
 
 std::string Hex(const unsigned char* bytes, size_t n) {
   static constexpr char kDigits[] = "0123456789abcdef";
@@ -57,6 +59,11 @@ std::string HashToken(std::string_view token) {
   return Hex(digest, length);
 }
 
+bool ConstantTimeEquals(std::string_view a, std::string_view b) {
+  if (a.size() != b.size()) return false;
+  return a.empty() || CRYPTO_memcmp(a.data(), b.data(), a.size()) == 0;
+}
+
 absl::StatusOr<std::string> NewRandomToken() {
   unsigned char bytes[32];
   if (RAND_bytes(bytes, sizeof bytes) != 1) return absl::InternalError("token: the OpenSSL random generator failed");
@@ -64,17 +71,25 @@ absl::StatusOr<std::string> NewRandomToken() {
 }
 
 void TokenRegistry::Add(const std::string& hash, Principal principal) {
-  principal.token_id = hash.substr(0, 12);
+  const std::string id = hash.substr(0, kTokenIdChars);
+  principal.token_id = id;
   std::lock_guard lock(mu_);
-  by_hash_[hash] = std::move(principal);
+  auto [first, last] = by_id_.equal_range(id);
+  for (auto it = first; it != last; ++it) {
+    if (it->second.hash == hash) {  // hashes from the store or an issue call, not a presented token
+      it->second.principal = std::move(principal);
+      return;
+    }
+  }
+  by_id_.emplace(id, Entry{hash, std::move(principal)});
 }
 
 int TokenRegistry::Revoke(const std::string& hash_prefix) {
   std::lock_guard lock(mu_);
   int removed = 0;
-  for (auto it = by_hash_.begin(); it != by_hash_.end();) {
-    if (!hash_prefix.empty() && it->first.compare(0, hash_prefix.size(), hash_prefix) == 0) {
-      it = by_hash_.erase(it);
+  for (auto it = by_id_.begin(); it != by_id_.end();) {
+    if (!hash_prefix.empty() && it->second.hash.compare(0, hash_prefix.size(), hash_prefix) == 0) {
+      it = by_id_.erase(it);
       ++removed;
     } else {
       ++it;
@@ -85,7 +100,7 @@ int TokenRegistry::Revoke(const std::string& hash_prefix) {
 
 size_t TokenRegistry::size() const {
   std::lock_guard lock(mu_);
-  return by_hash_.size();
+  return by_id_.size();
 }
 
 absl::StatusOr<Principal> TokenRegistry::Authenticate(std::string_view token) const {
@@ -95,9 +110,15 @@ absl::StatusOr<Principal> TokenRegistry::Authenticate(std::string_view token) co
   }
   const std::string hash = HashToken(token);
   std::lock_guard lock(mu_);
-  auto it = by_hash_.find(hash);
-  if (it == by_hash_.end()) return absl::UnauthenticatedError("unknown or revoked bearer token");
-  return it->second;
+  // The id is public (see the class comment); the digest is compared in constant time, and every
+  // candidate with the id is compared (almost always one: 48-bit ids).
+  const Principal* found = nullptr;
+  auto [first, last] = by_id_.equal_range(hash.substr(0, kTokenIdChars));
+  for (auto it = first; it != last; ++it) {
+    if (ConstantTimeEquals(it->second.hash, hash)) found = &it->second.principal;
+  }
+  if (!found) return absl::UnauthenticatedError("unknown or revoked bearer token");
+  return *found;
 }
 
 absl::Status Authorize(const Principal& who, Action action, const std::string& camera_id) {

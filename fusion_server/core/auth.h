@@ -7,7 +7,8 @@
 //   viewer — may only read scene state (Subscribe, GetStaticModel);
 //   admin  — may manage cameras and tokens, and may also read scene state.
 // Tokens are kept as SHA-256 digests only, in memory and in the store; a presented token is
-// hashed and looked up. Unknown or revoked token: Unauthenticated. Known token outside its role's
+// hashed and looked up, comparing the secret part of the digest in constant time (issue 14, see
+// TokenRegistry). Unknown or revoked token: Unauthenticated. Known token outside its role's
 // rights: PermissionDenied naming the role and the call.
 #include <map>
 #include <mutex>
@@ -40,9 +41,19 @@ struct Principal {
 // SHA-256 of `token` as 64 lowercase hex characters (OpenSSL libcrypto).
 std::string HashToken(std::string_view token);
 
+// Whether `a` and `b` are equal, in time that depends on their lengths only, not on where they
+// differ (OpenSSL CRYPTO_memcmp). Lengths are not secret here: every digest is 64 characters.
+bool ConstantTimeEquals(std::string_view a, std::string_view b);
+
 // A fresh random token: 32 bytes from the OpenSSL CSPRNG as 64 hex characters.
 absl::StatusOr<std::string> NewRandomToken();
 
+// Tokens by digest. Lookup goes by the token id, the digest's first 12 hex characters, which is
+// public (logs, audit rows, ListTokens print it) and so may be compared with an ordinary,
+// short-circuiting map search; the whole digest of each candidate with that id is then compared
+// with ConstantTimeEquals. The time a lookup takes thus reveals nothing beyond whether some
+// token's public id matches the presented token's digest prefix, and that only tells an attacker
+// about SHA-256 outputs, not about any token.
 class TokenRegistry {
  public:
   // Adds a token by its hash; replaces an earlier entry with the same hash.
@@ -55,8 +66,12 @@ class TokenRegistry {
   absl::StatusOr<Principal> Authenticate(std::string_view token) const;
 
  private:
+  struct Entry {
+    std::string hash;  // 64 hex characters
+    Principal principal;
+  };
   mutable std::mutex mu_;
-  std::map<std::string, Principal> by_hash_;
+  std::multimap<std::string, Entry> by_id_;  // key: token id (hash prefix, public)
 };
 
 // Ok, or PermissionDenied naming the role, the action and (for sensors) both cameras.

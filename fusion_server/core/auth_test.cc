@@ -33,6 +33,43 @@ TEST(Auth, Registry_UnknownEmptyAndRevokedTokensAreUnauthenticated) {
   EXPECT_EQ(registry.Revoke(""), 0);
 }
 
+TEST(Auth, ConstantTimeEquals_EqualUnequalAndDifferentLengths) {
+  const std::string a = HashToken("a"), b = HashToken("b");
+  EXPECT_TRUE(ConstantTimeEquals(a, std::string(a)));
+  EXPECT_FALSE(ConstantTimeEquals(a, b));
+  std::string last = a;
+  last.back() = last.back() == '0' ? '1' : '0';  // differs in the final byte only
+  EXPECT_FALSE(ConstantTimeEquals(a, last));
+  std::string first = a;
+  first.front() = first.front() == '0' ? '1' : '0';
+  EXPECT_FALSE(ConstantTimeEquals(a, first));
+  EXPECT_FALSE(ConstantTimeEquals(a, a.substr(0, 63)));
+  EXPECT_FALSE(ConstantTimeEquals(a.substr(0, 12), a));
+  EXPECT_FALSE(ConstantTimeEquals("", a));
+  EXPECT_TRUE(ConstantTimeEquals("", ""));
+}
+
+TEST(Auth, Registry_TokensSharingTheirPublicIdAreToldApartByTheWholeDigest) {
+  // Two entries under one token id (the digest's first 12 hex): the lookup by id is only a first
+  // cut; the presented token's whole digest picks the entry.
+  const std::string real = HashToken("s1");
+  const std::string twin = real.substr(0, 12) + std::string(52, '0');
+  TokenRegistry registry;
+  registry.Add(twin, {Role::kAdmin});
+  registry.Add(real, {Role::kSensor, "cam1"});
+  EXPECT_EQ(registry.size(), 2u);
+  absl::StatusOr<Principal> who = registry.Authenticate("s1");
+  ASSERT_TRUE(who.ok()) << who.status();
+  EXPECT_EQ(who->role, Role::kSensor);
+  EXPECT_EQ(who->token_id, real.substr(0, 12));
+  registry.Add(real, {Role::kViewer});  // same digest: replaced, not added
+  EXPECT_EQ(registry.size(), 2u);
+  EXPECT_EQ(registry.Authenticate("s1")->role, Role::kViewer);
+  EXPECT_EQ(registry.Revoke(real), 1);  // a full digest revokes that entry only
+  EXPECT_TRUE(absl::IsUnauthenticated(registry.Authenticate("s1").status()));
+  EXPECT_EQ(registry.size(), 1u);
+}
+
 TEST(Auth, Authorize_EachRoleIsRefusedOutsideItsRights) {
   const Principal sensor{Role::kSensor, "cam1", "aaaa"};
   const Principal fleet{Role::kSensor, "", "bbbb", true};

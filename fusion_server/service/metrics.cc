@@ -54,10 +54,17 @@ std::string ServerMetrics::RenderPrometheus() const {
   counter("ave_viewer_drops_total", "Frames skipped for slow viewers (latest-frame semantics).", viewer_drops);
   counter("ave_scene_updates_out_total", "Scene updates written to viewers.", updates_out);
   counter("ave_auth_failures_total", "Calls refused as unauthenticated or not permitted.", auth_failures);
+  counter("ave_auth_rate_limited_total",
+          "Calls refused without reading their token: the peer failed to authenticate too often.", auth_rate_limited);
+  counter("ave_insecure_plaintext_warnings_total", "Warnings logged that tokens cross the network in clear.",
+          insecure_plaintext_warnings);
   gauge("ave_sensors_connected", "Open sensor streams.", sensors_connected);
   gauge("ave_viewers_connected", "Open viewer subscriptions.", viewers_connected);
   gauge("ave_viewer_queue_depth", "Frames waiting in viewers' one-per-camera slots.", viewer_queue_depth);
   gauge("ave_flow_saturated", "1 while sensors are asked for a lower rate or quality.", saturated);
+  gauge("ave_insecure_plaintext", "1 while serving plaintext on a non-loopback address (--insecure-plaintext).",
+        insecure_plaintext);
+  gauge("ave_auth_tracked_peers", "Peers tracked by the failed-authentication limiter (as of the last failure).", auth_tracked_peers);
   capture_to_ingest_s.Render("ave_capture_to_ingest_seconds", "Capture (server clock) to acceptance.", out);
   ingest_to_send_s.Render("ave_ingest_to_send_seconds", "Acceptance to the write to a viewer.", out);
   capture_to_send_s.Render("ave_capture_to_send_seconds", "Capture (server clock) to the write to a viewer.", out);

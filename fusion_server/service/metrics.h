@@ -39,11 +39,15 @@ struct ServerMetrics {
   std::atomic<uint64_t> bytes_out{0};
   std::atomic<uint64_t> viewer_drops{0};    // frames skipped for a slow viewer (latest-frame semantics)
   std::atomic<uint64_t> updates_out{0};
-  std::atomic<uint64_t> auth_failures{0};
+  std::atomic<uint64_t> auth_failures{0};       // calls refused: bad or missing token, or outside the role
+  std::atomic<uint64_t> auth_rate_limited{0};   // calls refused unread: their peer failed too often (issue 14)
+  std::atomic<uint64_t> insecure_plaintext_warnings{0};
   std::atomic<int64_t> sensors_connected{0};
   std::atomic<int64_t> viewers_connected{0};
   std::atomic<int64_t> viewer_queue_depth{0};  // frames pending in viewers' (one-per-camera) slots
   std::atomic<int64_t> saturated{0};           // 1 while the flow hint is lowered
+  std::atomic<int64_t> insecure_plaintext{0};  // 1 when serving plaintext off loopback (--insecure-plaintext)
+  std::atomic<int64_t> auth_tracked_peers{0};  // peers with failed authentications in the limiter's table
   LatencyHistogram capture_to_ingest_s;  // skew-corrected capture -> accepted by the server
   LatencyHistogram ingest_to_send_s;     // accepted -> written to a viewer
   LatencyHistogram capture_to_send_s;    // skew-corrected capture -> written to a viewer

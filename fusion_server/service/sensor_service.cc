@@ -1,3 +1,5 @@
+#include <cmath>
+
 #include "absl/strings/str_cat.h"
 #include "fusion_server/core/convert.h"
 #include "fusion_server/core/validation.h"
@@ -27,34 +29,106 @@ FlowDecision ServerShared::Flow() {
   return d;
 }
 
+int64_t ServerShared::AuthNowNs() const {
+  if (options.auth_clock_ns) return options.auth_clock_ns();
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+namespace {
+
+std::string JsonString(const std::string& s) {
+  std::string out = "\"";
+  for (const char c : s) {
+    if (c == '"' || c == '\\') {
+      out += '\\';
+      out += c;
+    } else if (static_cast<unsigned char>(c) < 0x20) {
+      static constexpr char kHex[] = "0123456789abcdef";
+      out += "\\u00";
+      out += kHex[(c >> 4) & 15];
+      out += kHex[c & 15];
+    } else {
+      out += c;
+    }
+  }
+  return out + "\"";
+}
+
+// Feeds a failed authentication to the limiter and audits the first of the peer's window and the
+// one that reaches the limit: at most two rows per peer per window, however hard it tries.
+void NoteAuthenticationFailure(ServerShared& shared, const std::string& peer, const std::string& call,
+                               const std::string& reason, int64_t now_ns) {
+  const AuthFailureLimiter::Failure f = shared.auth_limiter.RecordFailure(peer, now_ns);
+  shared.metrics.auth_tracked_peers = static_cast<int64_t>(shared.auth_limiter.tracked_peers());
+  const AuthLimiterOptions& limit = shared.auth_limiter.options();
+  const auto audit = [&](const std::string& action, const std::string& after) {
+    if (auto s = shared.store.AppendAudit("unauthenticated@" + peer, action, call, "{}", after); !s.ok()) {
+      AVE_LOG(ERROR) << "audit write failed: " << s.status().message();
+    }
+  };
+  if (f.opened_window) {
+    std::string after = absl::StrCat("{\"reason\":", JsonString(reason));
+    if (f.previous_failures > 0) {
+      absl::StrAppend(&after, ",\"previous_window\":{\"failures\":", f.previous_failures,
+                      ",\"rate_limited\":", f.previous_refusals, "}");
+    }
+    audit("AuthRefused", after + "}");
+  }
+  if (f.now_limited) {
+    audit("AuthRateLimited", absl::StrCat("{\"failures\":", f.failures_in_window, ",\"window_s\":",
+                                          limit.window_ns / 1e9, ",\"reason\":", JsonString(reason), "}"));
+    AVE_LOG(WARNING) << peer << ": " << f.failures_in_window << " failed authentications within "
+                     << limit.window_ns / 1e9 << " s: its calls are refused until the window ends";
+  }
+}
+
+}  // namespace
+
 grpc::Status AuthorizeCall(ServerShared& shared, const grpc::ServerContext& context, Action action,
                            const std::string& camera_id, const std::string& token, Principal* principal) {
+  const std::string call = absl::StrCat(ActionName(action), camera_id.empty() ? "" : " as camera '" + camera_id + "'");
+  const std::string peer = PeerHost(context.peer());
+  const int64_t now_ns = shared.AuthNowNs();
+  // Issue 14: a peer over its failure budget is refused before its token is even read, so that
+  // a right guess made while limited is not told apart from a wrong one.
+  if (const AuthFailureLimiter::Admission a = shared.auth_limiter.Admit(peer, now_ns); !a.allowed) {
+    ++shared.metrics.auth_rate_limited;
+    const int64_t retry_s = static_cast<int64_t>(std::ceil(a.retry_after_ns / 1e9));
+    if (a.first_refusal) AVE_LOG(WARNING) << peer << ": refused to " << call << ": rate limited for " << retry_s << " s";
+    return grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                        absl::StrCat("too many failed authentications from ", peer, " (", a.failures_in_window,
+                                     " within ", shared.auth_limiter.options().window_ns / 1e9, " s): retry in ",
+                                     retry_s, " s"));
+  }
   const auto refuse = [&](grpc::Status status) {
     ++shared.metrics.auth_failures;
-    AVE_LOG(WARNING) << context.peer() << ": refused to " << ActionName(action)
-                     << (camera_id.empty() ? "" : " as camera '" + camera_id + "'") << ": " << status.error_message();
+    AVE_LOG(WARNING) << context.peer() << ": refused to " << call << ": " << status.error_message();
     return status;
+  };
+  // A failure to prove who the caller is (no token, malformed, unknown or revoked): counted
+  // against the peer. Refusals of a known token outside its role's rights are not guesses.
+  const auto refuse_unauthenticated = [&](const std::string& message) {
+    NoteAuthenticationFailure(shared, peer, call, message, now_ns);
+    return refuse(grpc::Status(grpc::StatusCode::UNAUTHENTICATED, message));
   };
   std::string presented = token;
   if (presented.empty()) {
     const auto& md = context.client_metadata();
     auto it = md.find("authorization");
     if (it == md.end()) {
-      return refuse(grpc::Status(grpc::StatusCode::UNAUTHENTICATED,
-                                 absl::StrCat("missing 'authorization: Bearer <token>' metadata to ", ActionName(action))));
+      return refuse_unauthenticated(absl::StrCat("missing 'authorization: Bearer <token>' metadata to ", ActionName(action)));
     }
     const std::string value(it->second.data(), it->second.size());
     constexpr std::string_view kBearer = "Bearer ";
-    if (value.rfind(kBearer, 0) != 0) {
-      return refuse(grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "authorization metadata must be 'Bearer <token>'"));
-    }
+    if (value.rfind(kBearer, 0) != 0) return refuse_unauthenticated("authorization metadata must be 'Bearer <token>'");
     presented = value.substr(kBearer.size());
   }
   absl::StatusOr<Principal> who = shared.tokens.Authenticate(presented);
   if (!who.ok()) {
     const std::string where = camera_id.empty() ? "" : absl::StrCat("camera '", camera_id, "': ");
-    return refuse(grpc::Status(grpc::StatusCode::UNAUTHENTICATED,
-                               absl::StrCat(where, std::string(who.status().message()), " (to ", ActionName(action), ")")));
+    return refuse_unauthenticated(
+        absl::StrCat(where, std::string(who.status().message()), " (to ", ActionName(action), ")"));
   }
   if (absl::Status s = Authorize(*who, action, camera_id); !s.ok()) return refuse(ToGrpc(s));
   if (action == Action::kStream && shared.options.sensor_requires_client_cert) {

@@ -1,6 +1,10 @@
 #include "fusion_server/service/server.h"
 
 #include <cmath>
+#include <condition_variable>
+#include <functional>
+#include <mutex>
+#include <thread>
 
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
@@ -15,6 +19,9 @@ namespace ave {
 std::string ServerOptions::Check() const {
   if (listen_address.empty()) return "listen_address is empty";
   if (store_path.empty()) return "store_path is empty";
+  if (absl::Status s = net::CheckServerTransport(listen_address, tls); !s.ok()) return std::string(s.message());
+  if (plaintext_warning_period.count() <= 0) return "plaintext_warning_period must be > 0";
+  if (const std::string why = auth_limit.Check(); !why.empty()) return why;
   if (sensor_requires_client_cert && tls.client_ca_file.empty()) {
     return "sensor_requires_client_cert needs tls.client_ca_file (--tls-client-ca)";
   }
@@ -29,12 +36,49 @@ std::string ServerOptions::Check() const {
   return {};
 }
 
+namespace {
+
+// Runs `task` every `period` on its own thread until destroyed; the destructor wakes and joins it
+// at once, whatever the period.
+class PeriodicTask {
+ public:
+  PeriodicTask(std::chrono::milliseconds period, std::function<void()> task)
+      : period_(period), task_(std::move(task)), thread_([this] { Run(); }) {}
+  ~PeriodicTask() {
+    {
+      std::lock_guard lock(mu_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    thread_.join();
+  }
+
+ private:
+  void Run() {
+    std::unique_lock lock(mu_);
+    while (!cv_.wait_for(lock, period_, [this] { return stop_; })) {
+      lock.unlock();
+      task_();
+      lock.lock();
+    }
+  }
+  const std::chrono::milliseconds period_;
+  const std::function<void()> task_;
+  std::mutex mu_;
+  std::condition_variable cv_;
+  bool stop_ = false;
+  std::thread thread_;  // last: starts once the members above exist
+};
+
+}  // namespace
+
 struct FusionServer::Impl {
   ServerOptions options;
   std::unique_ptr<store::Store> store;
   SceneState state;
   std::unique_ptr<internal::ServerShared> shared;
   std::unique_ptr<MetricsHttpServer> metrics_http;
+  std::unique_ptr<PeriodicTask> plaintext_warning;  // while serving plaintext off loopback
   uint64_t model_version = 0;
   std::unique_ptr<internal::SensorServiceImpl> sensor;
   std::unique_ptr<internal::SceneServiceImpl> scene;
@@ -116,6 +160,12 @@ absl::StatusOr<std::unique_ptr<FusionServer>> FusionServer::Start(const ServerOp
         MetricsHttpServer::Start(options.metrics_listen, [shared] { return shared->metrics.RenderPrometheus(); });
     if (!http.ok()) return http.status();
     impl->metrics_http = std::move(*http);
+    // The metrics carry aggregate counts only (no token, camera id or peer address), so they may
+    // be scraped across the network in plaintext; say so when they are.
+    if (!net::IsLoopbackAddress(options.metrics_listen)) {
+      AVE_LOG(INFO) << "metrics on " << options.metrics_listen
+                    << " are plaintext HTTP without authentication (aggregate counts only)";
+    }
   }
 
   impl->sensor = std::make_unique<internal::SensorServiceImpl>(*impl->shared);
@@ -139,6 +189,19 @@ absl::StatusOr<std::unique_ptr<FusionServer>> FusionServer::Start(const ServerOp
   if (!impl->server || impl->port == 0) {
     return absl::UnavailableError(absl::StrCat("cannot listen on ", options.listen_address, " (address in use?)"));
   }
+  if (options.tls.cert_file.empty() && !net::IsLoopbackAddress(options.listen_address)) {
+    // Allowed by --insecure-plaintext only (Check()); repeated so that nobody forgets it is on.
+    ServerMetrics* metrics = &impl->shared->metrics;
+    auto warn = [metrics, address = absl::StrCat(options.listen_address, " (port ", impl->port, ")")] {
+      ++metrics->insecure_plaintext_warnings;
+      AVE_LOG(WARNING) << "serving PLAINTEXT on " << address
+                       << " (--insecure-plaintext): bearer tokens and video cross the network in clear; "
+                          "serve TLS with --tls-cert/--tls-key";
+    };
+    metrics->insecure_plaintext = 1;
+    warn();
+    impl->plaintext_warning = std::make_unique<PeriodicTask>(options.plaintext_warning_period, warn);
+  }
   AVE_LOG(INFO) << "ave-server listening on port " << impl->port << (options.tls.cert_file.empty() ? " (plaintext)" : " (TLS)")
                 << ", store " << options.store_path << ", " << cameras->size() << " cameras registered, "
                 << stored->size() << " issued tokens"
@@ -159,6 +222,7 @@ void FusionServer::Shutdown(std::chrono::milliseconds grace) {
   impl_->state.Shutdown();
   impl_->server->Shutdown(std::chrono::system_clock::now() + grace);
   impl_->metrics_http.reset();
+  impl_->plaintext_warning.reset();
   AVE_LOG(INFO) << "ave-server stopped";
 }
 

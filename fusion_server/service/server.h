@@ -4,11 +4,13 @@
 // and the static model from the store, and serves until Shutdown().
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 
 #include "absl/status/statusor.h"
 #include "ave/net/tls.h"
+#include "fusion_server/core/auth_limiter.h"
 #include "fusion_server/core/flow.h"
 #include "fusion_server/core/scene_state.h"
 #include "fusion_server/core/validation.h"
@@ -27,8 +29,16 @@ struct ServerOptions {
   std::string viewer_token;
   std::string admin_token;
   // Transport: TLS when tls.cert_file is set; mutual TLS when tls.client_ca_file is set too.
+  // Plaintext on a non-loopback listen address is refused unless tls.insecure_plaintext is set
+  // (--insecure-plaintext); then a warning is logged at start and every plaintext_warning_period,
+  // and the metric ave_insecure_plaintext is 1 (issue 14).
   net::TlsServerOptions tls;
+  std::chrono::milliseconds plaintext_warning_period{60'000};
   bool sensor_requires_client_cert = false;  // sensors must present a verified client certificate
+  // Failed authentications per peer address (issue 14): beyond auth_limit.max_failures in a window
+  // the peer's calls are refused (RESOURCE_EXHAUSTED) until the window ends.
+  AuthLimiterOptions auth_limit;
+  std::function<int64_t()> auth_clock_ns;  // the limiter's clock in ns (tests inject one); empty = steady clock
   // Prometheus text metrics over HTTP ("host:port", port 0 = any); empty = off.
   std::string metrics_listen;
   FlowOptions flow;  // server-wide budgets; max_fps/jpeg_quality come from the two hints below

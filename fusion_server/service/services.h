@@ -9,6 +9,7 @@
 
 #include "ave/v1/ave.grpc.pb.h"
 #include "fusion_server/core/auth.h"
+#include "fusion_server/core/auth_limiter.h"
 #include "fusion_server/core/flow.h"
 #include "fusion_server/core/scene_state.h"
 #include "fusion_server/service/metrics.h"
@@ -21,11 +22,14 @@ grpc::Status ToGrpc(const absl::Status& status);
 
 // What the three services share: options, live state, store, tokens, metrics and load meters.
 struct ServerShared {
-  ServerShared(const ServerOptions& o, SceneState& s, store::Store& st) : options(o), state(s), store(st) {}
+  ServerShared(const ServerOptions& o, SceneState& s, store::Store& st)
+      : options(o), state(s), store(st), auth_limiter(o.auth_limit) {}
   const ServerOptions& options;
   SceneState& state;
   store::Store& store;
   TokenRegistry tokens;
+  AuthFailureLimiter auth_limiter;  // failed authentications per peer address (issue 14)
+  int64_t AuthNowNs() const;        // options.auth_clock_ns, or the steady clock
   ServerMetrics metrics;
   RateWindow ingest;          // accepted JPEG frames (bytes = JPEG size)
   RateWindow viewer_sent;     // bytes field = JPEGs written to viewers
@@ -36,6 +40,9 @@ struct ServerShared {
 // Authenticates the call's bearer token ("authorization: Bearer <token>" metadata, or `token`
 // when non-empty: the sensor hello's) and authorizes `action`. Unauthenticated / PermissionDenied
 // with a message naming the call and, for sensors, the camera. Counts refusals in metrics.
+// A peer that failed to authenticate too often is refused first, ResourceExhausted, without its
+// token being read; authentication failures feed that limiter and are audited (the first of each
+// peer's window, and the one that sets the limit off), see auth_limiter.h.
 grpc::Status AuthorizeCall(ServerShared& shared, const grpc::ServerContext& context, Action action,
                            const std::string& camera_id = {}, const std::string& token = {},
                            Principal* principal = nullptr);

@@ -51,6 +51,7 @@ bool ClockOffsetEstimator::Acked(uint64_t sequence, int64_t server_ns, int64_t l
 
 std::string AgentOptions::Check() const {
   if (server.empty()) return "server is empty";
+  if (absl::Status s = net::CheckClientTransport(server, tls); !s.ok()) return std::string(s.message());
   if (camera_id.empty()) return "camera_id is empty";
   if (!(fps > 0 && fps <= 240)) return "fps must be in (0, 240]";
   if (jpeg_quality < 1 || jpeg_quality > 100) return "jpeg_quality must be in 1..100";

@@ -21,6 +21,19 @@ namespace {
 
 using fixtures::FakeSource;
 
+TEST(AgentOptions, PlaintextTokenToANonLoopbackServerIsRefusedUnlessTold) {
+  AgentOptions options;
+  options.camera_id = "cam";
+  EXPECT_EQ(options.Check(), "");  // 127.0.0.1: as before
+  options.server = "ave-server.example:50051";
+  EXPECT_NE(options.Check().find("'ave-server.example:50051'"), std::string::npos);
+  EXPECT_NE(options.Check().find("--insecure-plaintext"), std::string::npos);
+  options.tls.insecure_plaintext = true;
+  EXPECT_EQ(options.Check(), "");
+  options.tls = {.ca_file = "ca.pem"};
+  EXPECT_EQ(options.Check(), "");
+}
+
 TEST(ClockOffsetEstimator, TakesTheSmallestRoundTrip) {
   ClockOffsetEstimator e;
   e.Sent(1, 1000);

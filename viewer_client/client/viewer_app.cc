@@ -36,8 +36,13 @@ const Eigen::Vector3f kPalette[] = {{1.0f, 0.85f, 0.1f}, {0.1f, 0.9f, 1.0f}, {1.
 
 std::string ViewerOptions::Check() const {
   if (servers.empty()) return "no server given";
-  for (const auto& s : servers)
+  for (const auto& s : servers) {
     if (s.empty()) return "a server address is empty";
+    if (absl::Status t = net::CheckClientTransport(s, {.ca_file = tls_ca, .insecure_plaintext = insecure_plaintext});
+        !t.ok()) {
+      return std::string(t.message());
+    }
+  }
   if (width < 64 || height < 64 || width > 8192 || height > 8192) return "size must be 64..8192 pixels per side";
   if (layout != "quad" && layout != "browse") return "layout must be 'quad' or 'browse'";
   if (locked_cameras.size() > 3) return "at most 3 locked cameras";
@@ -169,7 +174,8 @@ class Session {
     for (size_t i = 0; i < options_.servers.size(); ++i) {
       absl::StatusOr<std::shared_ptr<grpc::Channel>> made = net::MakeChannel(
           options_.servers[i], {.ca_file = options_.tls_ca, .cert_file = options_.tls_cert,
-                                .key_file = options_.tls_key, .server_name = options_.tls_server_name});
+                                .key_file = options_.tls_key, .server_name = options_.tls_server_name,
+                                .insecure_plaintext = options_.insecure_plaintext});
       if (!made.ok()) return absl::InvalidArgumentError("viewer: " + std::string(made.status().message()));
       clients_.push_back(std::make_unique<SceneClient>(*made, options_.token, options_.viewer_id));
     }

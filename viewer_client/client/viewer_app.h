@@ -40,6 +40,7 @@ struct ViewerOptions {
   // TLS to the server (issue 8): PEM CA of the server certificate (empty = plaintext), and an
   // optional client certificate and key for mutual TLS.
   std::string tls_ca, tls_cert, tls_key, tls_server_name;
+  bool insecure_plaintext = false;  // send the token in plaintext to non-loopback servers (issue 14)
 
   std::string Check() const;
 };

@@ -250,6 +250,15 @@ TEST(ViewerOptions, CheckNamesTheProblem) {
   EXPECT_EQ(o.Check(), "");
   o.servers = {};
   EXPECT_NE(o.Check().find("server"), std::string::npos);
+  // Issue 14: the viewer token goes in plaintext to loopback only, unless told.
+  o.servers = {"127.0.0.1:50051", "10.0.0.7:50051"};
+  EXPECT_NE(o.Check().find("'10.0.0.7:50051'"), std::string::npos);
+  EXPECT_NE(o.Check().find("--insecure-plaintext"), std::string::npos);
+  o.insecure_plaintext = true;
+  EXPECT_EQ(o.Check(), "");
+  o.insecure_plaintext = false;
+  o.tls_ca = "ca.pem";
+  EXPECT_EQ(o.Check(), "");
 }
 
 }  // namespace

@@ -1,10 +1,12 @@
 #pragma once
 // Transport security for every AVE channel (issue 8): TLS with a site CA (deploy/make-certs.sh),
 // optionally mutual TLS so that sensor nodes prove themselves with a client certificate too.
-// An empty CA file on a client, or an empty certificate on the server, means plaintext, which
-// only loopback use should choose.
+// An empty CA file on a client, or an empty certificate on the server, means plaintext: bearer
+// tokens would cross the network in clear, so plaintext is refused off loopback unless the operator
+// says `insecure_plaintext` (--insecure-plaintext) (issue 14).
 #include <memory>
 #include <string>
+#include <string_view>
 
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/security/credentials.h>
@@ -20,6 +22,8 @@ struct TlsClientOptions {
   std::string key_file;
   // Name the server certificate must carry when it differs from the dialled host (e.g. "localhost").
   std::string server_name;
+  // Send the bearer token in plaintext to a non-loopback server anyway (--insecure-plaintext).
+  bool insecure_plaintext = false;
 };
 
 struct TlsServerOptions {
@@ -27,7 +31,24 @@ struct TlsServerOptions {
   std::string key_file;        // PEM private key
   std::string client_ca_file;  // PEM CA for client certificates; empty = no client certificates
   bool require_client_cert = false;  // refuse handshakes without a client certificate signed by client_ca_file
+  // Serve plaintext on a non-loopback address anyway (--insecure-plaintext).
+  bool insecure_plaintext = false;
 };
+
+// True when every address `address` names is on this host: 127.0.0.0/8, ::1 (also as
+// ::ffff:127.x.y.z), "localhost", or a unix socket. Takes listen addresses and gRPC targets alike:
+// "host:port", "[v6]:port", "dns:///host:port", "ipv4:a:p,b:p", "ipv6:[a]:p", "unix:path",
+// "unix-abstract:name". 0.0.0.0, [::], an empty host, and every other address or host name are not
+// loopback (a name could resolve anywhere).
+bool IsLoopbackAddress(std::string_view address);
+
+// OK, or FailedPrecondition naming `target`: without TLS the client would send its bearer token in
+// plaintext to a server off this host, and options.insecure_plaintext does not allow it.
+absl::Status CheckClientTransport(const std::string& target, const TlsClientOptions& options);
+
+// OK, or FailedPrecondition naming `address`: without TLS the server would take bearer tokens in
+// plaintext on an address reachable from the network, and options.insecure_plaintext does not allow it.
+absl::Status CheckServerTransport(const std::string& address, const TlsServerOptions& options);
 
 // The file's bytes, or NotFound/Unavailable naming the file and what it was for.
 absl::StatusOr<std::string> ReadSmallFile(const std::string& path, const std::string& what);
@@ -35,7 +56,8 @@ absl::StatusOr<std::string> ReadSmallFile(const std::string& path, const std::st
 absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> ClientCredentials(const TlsClientOptions& options);
 absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> ServerCredentials(const TlsServerOptions& options);
 
-// A channel to `target` with the credentials above. `args` may carry further channel arguments.
+// A channel to `target` with the credentials above, after CheckClientTransport. `args` may carry
+// further channel arguments.
 absl::StatusOr<std::shared_ptr<grpc::Channel>> MakeChannel(const std::string& target, const TlsClientOptions& options,
                                                            grpc::ChannelArguments args = {});
 
