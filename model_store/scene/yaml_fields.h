@@ -4,9 +4,10 @@
 // range, and every error carries the document line and the field path, e.g.
 //   campus.yaml:42: cameras[3].fps: must be > 0
 //
-// Used by the scene part (scene_file.cc) and the simulator part (sensor_agent/sim/scenario.cc) of
-// one scenario file. Parsing functions throw FieldError; the public entry points catch it and
-// return absl::Status (FormatFieldError). Include only from .cc files: it pulls in yaml-cpp.
+// Used by the scene part (scene_file.cc) and the simulator part (the simulator's scenario.cc,
+// target ave_scenario) of one scenario file. Parsing functions throw FieldError; the public entry
+// points catch it and return absl::Status (FormatFieldError). Include only from .cc files: it
+// pulls in yaml-cpp.
 #include <initializer_list>
 #include <optional>
 #include <set>

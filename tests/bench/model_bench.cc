@@ -26,12 +26,12 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "model_store/buildings/survey_truth.h"
 #include "model_store/lidar/las.h"
 #include "model_store/pipeline/static_model.h"
-#include "model_store/pipeline/terrain_score.h"
 #include "sensor_agent/sim/scenario.h"
 #include "tests/bench/bench.h"
+#include "tests/truth/survey_truth.h"
+#include "tests/truth/terrain_score.h"
 
 namespace ave::bench {
 namespace {
