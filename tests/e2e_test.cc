@@ -66,14 +66,10 @@ Rgb Bilinear(const DecodedImageRef& im, double u, double v) {
 class EndToEnd : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = std::filesystem::temp_directory_path() / ("ave_e2e_" + std::to_string(::getpid()));
-    std::filesystem::create_directories(dir_);
-    ServerOptions options = fixtures::LoopbackServer((dir_ / "ave.db").string(), kSensor, kViewer, kAdmin);
-    auto server = FusionServer::Start(options);
-    ASSERT_TRUE(server.ok()) << server.status();
-    server_ = std::move(*server);
-    address_ = "127.0.0.1:" + std::to_string(server_->port());
-    channel_ = grpc::CreateChannel(address_, grpc::InsecureChannelCredentials());
+    const absl::Status started = server_.Start(server_.Options(kSensor, kViewer, kAdmin));
+    ASSERT_TRUE(started.ok()) << started;
+    address_ = server_.address();
+    channel_ = server_.InsecureChannel();
     AdminClient admin(channel_, kAdmin);
     for (const auto& cam : campus_.cameras) ASSERT_TRUE(admin.AddCamera(CampusCameraRecord(cam)).ok());
     for (size_t i = 0; i < campus_.cameras.size(); ++i) {
@@ -94,13 +90,11 @@ class EndToEnd : public ::testing::Test {
   void TearDown() override {
     for (auto& s : stops_) s = true;
     for (auto& t : agents_) t.join();
-    server_.reset();
-    std::filesystem::remove_all(dir_);
+    server_.Stop();
   }
 
   scene::SyntheticCampus campus_ = scene::BuiltinCampus();
-  std::filesystem::path dir_;
-  std::unique_ptr<FusionServer> server_;
+  fixtures::LocalServer server_{"ave_e2e"};
   std::string address_;
   std::shared_ptr<grpc::Channel> channel_;
   std::array<std::atomic<bool>, 3> stops_;
@@ -146,7 +140,7 @@ TEST_F(EndToEnd, VideoLandsWhereCameraOneSeesAndNotBehindBuildings) {
   ASSERT_TRUE((*renderer)->Render({view}, kW, kH).ok());
   auto everything = (*context)->ReadPixels();
   ASSERT_TRUE(everything.ok());
-  ASSERT_TRUE(viewer::WritePng((dir_ / "e2e_all.png").string(), *everything, kW, kH).ok());
+  ASSERT_TRUE(viewer::WritePng((server_.dir() / "e2e_all.png").string(), *everything, kW, kH).ok());
 
   // Camera 1 alone, so each pixel has one expected colour.
   const CameraView* cam1 = nullptr;
@@ -243,18 +237,14 @@ TEST_F(EndToEnd, VideoLandsWhereCameraOneSeesAndNotBehindBuildings) {
 // Agents survive a server restart: the stream breaks, the agent backs off, reconnects to the new
 // server on the same port (which reloads the camera from the store) and frames flow again.
 TEST(AgentReconnect, SurvivesServerRestart) {
-  const auto dir = std::filesystem::temp_directory_path() / ("ave_reconnect_" + std::to_string(::getpid()));
-  std::filesystem::create_directories(dir);
-  ServerOptions options = fixtures::LoopbackServer((dir / "ave.db").string(), kSensor, "", kAdmin);
+  fixtures::LocalServer server("ave_reconnect");
+  ServerOptions options = server.Options(kSensor, "", kAdmin);
   options.campus_grid_m = 8;
-  auto first = FusionServer::Start(options);
-  ASSERT_TRUE(first.ok()) << first.status();
-  const int port = (*first)->port();
-  const std::string address = "127.0.0.1:" + std::to_string(port);
+  const absl::Status first = server.Start(options);
+  ASSERT_TRUE(first.ok()) << first;
+  const std::string address = server.address();
   const scene::SyntheticCampus campus = scene::BuiltinCampus();
-  ASSERT_TRUE(AdminClient(grpc::CreateChannel(address, grpc::InsecureChannelCredentials()), kAdmin)
-                  .AddCamera(CampusCameraRecord(campus.cameras[1]))
-                  .ok());
+  ASSERT_TRUE(AdminClient(server.InsecureChannel(), kAdmin).AddCamera(CampusCameraRecord(campus.cameras[1])).ok());
 
   AgentOptions a;
   a.server = address;
@@ -274,22 +264,20 @@ TEST(AgentReconnect, SurvivesServerRestart) {
     while (!done() && std::chrono::steady_clock::now() < deadline) std::this_thread::sleep_for(std::chrono::milliseconds(20));
     return done();
   };
-  ASSERT_TRUE(wait_for([&] { return (*first)->state().LatestFrame(a.camera_id) != nullptr; }, 20));
-  (*first)->Shutdown(std::chrono::milliseconds(0));
-  first->reset();
+  ASSERT_TRUE(wait_for([&] { return server->state().LatestFrame(a.camera_id) != nullptr; }, 20));
+  server->Shutdown(std::chrono::milliseconds(0));
+  server.Stop();
   const int64_t sent_before = streamer.stats().frames_sent;
 
   options.listen_address = address;  // same port
-  auto second = FusionServer::Start(options);
-  ASSERT_TRUE(second.ok()) << second.status();
-  EXPECT_TRUE(wait_for([&] { return (*second)->state().LatestFrame(a.camera_id) != nullptr; }, 20));
+  const absl::Status second = server.Start(options);
+  ASSERT_TRUE(second.ok()) << second;
+  EXPECT_TRUE(wait_for([&] { return server->state().LatestFrame(a.camera_id) != nullptr; }, 20));
   stop = true;
   agent.join();
   const AgentStats stats = streamer.stats();
   EXPECT_GE(stats.connects, 2);
   EXPECT_GT(stats.frames_sent, sent_before);
-  second->reset();
-  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

@@ -21,7 +21,7 @@
 
 #include "ave/v1/ave.grpc.pb.h"
 #include "fusion_server/admin/admin_client.h"
-#include "fusion_server/core/convert.h"
+#include "fusion_server/service/test_fixtures.h"
 #include "grpc/health/v1/health.grpc.pb.h"
 #include "model_store/common/log.h"
 #include "model_store/db/store.h"
@@ -40,6 +40,7 @@ int EnvInt(const char* name, int fallback) {
 const int kCameras = EnvInt("AVE_FAULT_CAMERAS", 10);
 const int kKills = EnvInt("AVE_FAULT_KILLS", 3);
 
+using fixtures::CameraRecord;
 using fixtures::FakeSource;
 
 int FreePort() {
@@ -109,16 +110,6 @@ class ServerProcess {
   pid_t pid_ = 0;
 };
 
-v1::Camera Camera(const std::string& id) {
-  v1::Camera c;
-  c.set_id(id);
-  c.set_name(id);
-  *c.mutable_intrinsics() = ToProto(PinholeIntrinsics::FromFov(64, 48, 60));
-  *c.mutable_mounting_pose() = ToProto(LookAt({0, 0, 10}, {10, 0, 0}));
-  c.set_enabled(true);
-  return c;
-}
-
 struct Agent {
   std::unique_ptr<AgentStreamer> streamer;
   std::atomic<bool> stop{false};
@@ -153,7 +144,7 @@ TEST(Faults, KillNineUnderLoadLosesNothingCommittedAndEveryoneIsBackWithinFiveSe
   std::vector<std::string> ids;
   for (int i = 0; i < kCameras; ++i) {
     ids.push_back("cam" + std::to_string(i));
-    ASSERT_TRUE(admin.AddCamera(Camera(ids.back())).ok());
+    ASSERT_TRUE(admin.AddCamera(CameraRecord(ids.back())).ok());
   }
   std::vector<Agent> agents(kCameras);
   for (int i = 0; i < kCameras; ++i) StartAgent(agents[i], server.address(), ids[i], dir);
@@ -199,7 +190,7 @@ TEST(Faults, KillNineUnderLoadLosesNothingCommittedAndEveryoneIsBackWithinFiveSe
   for (int kill = 0; kill < kKills; ++kill) {
     std::this_thread::sleep_for(std::chrono::milliseconds(1200));  // load runs
     // A committed write right before the crash.
-    ASSERT_TRUE(admin.AddCamera(Camera("extra" + std::to_string(kill))).ok());
+    ASSERT_TRUE(admin.AddCamera(CameraRecord("extra" + std::to_string(kill))).ok());
     ++committed_cameras;
     std::vector<int64_t> acked_before;
     for (auto& a : agents) acked_before.push_back(a.streamer->stats().frames_acked);

@@ -117,19 +117,14 @@ class BlackholeProxy {
 };
 
 TEST(LinkBlock, AgentDetectsASilentLinkAndIsBackWithinFiveSecondsOfItsReturn) {
-  const auto dir = std::filesystem::temp_directory_path() / ("ave_link_block_" + std::to_string(::getpid()));
-  std::filesystem::create_directories(dir);
-  ServerOptions options = fixtures::LoopbackServer((dir / "ave.db").string(), "s", "", "a");
+  fixtures::LocalServer server("ave_link_block");
+  ServerOptions options = server.Options("s", "", "a");
   options.campus_grid_m = 8;
-  auto server = FusionServer::Start(options);
-  ASSERT_TRUE(server.ok()) << server.status();
+  const absl::Status started = server.Start(options);
+  ASSERT_TRUE(started.ok()) << started;
   const scene::CameraSpec camera = scene::BuiltinCampus().cameras[0];
-  ASSERT_TRUE(AdminClient(grpc::CreateChannel("127.0.0.1:" + std::to_string((*server)->port()),
-                                              grpc::InsecureChannelCredentials()),
-                          "a")
-                  .AddCamera(CampusCameraRecord(camera))
-                  .ok());
-  BlackholeProxy proxy((*server)->port());
+  ASSERT_TRUE(AdminClient(server.InsecureChannel(), "a").AddCamera(CampusCameraRecord(camera)).ok());
+  BlackholeProxy proxy(server.port());
 
   AgentOptions a;
   a.server = "127.0.0.1:" + std::to_string(proxy.port());
@@ -137,7 +132,7 @@ TEST(LinkBlock, AgentDetectsASilentLinkAndIsBackWithinFiveSecondsOfItsReturn) {
   a.token = "s";
   a.fps = 10;
   a.keepalive = std::chrono::milliseconds(500);
-  a.spill_path = (dir / "spill.bin").string();
+  a.spill_path = (server.dir() / "spill.bin").string();
   auto source = OpenSource("sim:campus#" + camera.id, {.fps = a.fps});
   ASSERT_TRUE(source.ok()) << source.status();
   AgentStreamer streamer(a, std::move(*source));
@@ -145,7 +140,7 @@ TEST(LinkBlock, AgentDetectsASilentLinkAndIsBackWithinFiveSecondsOfItsReturn) {
   std::thread agent([&] { EXPECT_TRUE(streamer.Run(stop).ok()); });
 
   auto latest = [&]() -> uint64_t {
-    auto f = (*server)->state().LatestFrame(camera.id);
+    auto f = server->state().LatestFrame(camera.id);
     return f ? f->sequence() : 0;
   };
   auto wait_for = [](const std::function<bool()>& done, std::chrono::milliseconds limit) {
@@ -186,8 +181,7 @@ TEST(LinkBlock, AgentDetectsASilentLinkAndIsBackWithinFiveSecondsOfItsReturn) {
             << streamer.stats().connects << " connection attempts\n";
   stop = true;
   agent.join();
-  server->reset();
-  std::filesystem::remove_all(dir);
+  server.Stop();
 }
 
 }  // namespace

@@ -80,13 +80,11 @@ struct Sample {
 TEST(ObjectsEndToEnd, DetectedWalkerArrivesAsAStablePlacedObjectWithAGrowingPath) {
   const scene::SyntheticCampus campus = scene::BuiltinCampus();
   const scene::CameraSpec& cam = *campus.FindCamera("cam1");
-  const std::filesystem::path dir =
-      std::filesystem::temp_directory_path() / ("ave_objects_e2e_" + std::to_string(::getpid()));
-  std::filesystem::create_directories(dir);
-  auto server = FusionServer::Start(fixtures::LoopbackServer((dir / "ave.db").string(), kSensor, kViewer, kAdmin));
-  ASSERT_TRUE(server.ok()) << server.status();
-  const std::string address = "127.0.0.1:" + std::to_string((*server)->port());
-  auto channel = grpc::CreateChannel(address, grpc::InsecureChannelCredentials());
+  fixtures::LocalServer server("ave_objects_e2e");
+  const absl::Status started = server.Start(server.Options(kSensor, kViewer, kAdmin));
+  ASSERT_TRUE(started.ok()) << started;
+  const std::string address = server.address();
+  auto channel = server.InsecureChannel();
   ASSERT_TRUE(AdminClient(channel, kAdmin).AddCamera(CampusCameraRecord(cam)).ok());
 
   SceneClock scene_clock;
@@ -148,8 +146,7 @@ TEST(ObjectsEndToEnd, DetectedWalkerArrivesAsAStablePlacedObjectWithAGrowingPath
   reader->Finish();
   stop = true;
   agent.join();
-  server->reset();
-  std::filesystem::remove_all(dir);
+  server.Stop();
 
   ASSERT_FALSE(seen.empty()) << "the viewer received no objects";
   // The longest-followed object.

@@ -102,19 +102,16 @@ inline std::string Jpeg(int width, int height, int seed) {
   return std::string(bytes.begin(), bytes.end());
 }
 
-// A FusionServer (campus static model, in-memory-like store under `dir`) with the grid cameras
-// registered.
+// A FusionServer (campus static model, store in a temporary directory named for `tag`, removed
+// with the site) with the grid cameras registered.
 class Site {
  public:
-  static absl::StatusOr<std::unique_ptr<Site>> Start(const std::filesystem::path& dir, int cameras) {
-    auto site = std::unique_ptr<Site>(new Site());
-    std::filesystem::create_directories(dir);
-    ServerOptions options = fixtures::LoopbackServer((dir / "select.db").string(), kSensor, kViewer, kAdmin);
-    auto server = FusionServer::Start(options);
-    if (!server.ok()) return server.status();
-    site->server_ = *std::move(server);
-    site->address_ = absl::StrCat("127.0.0.1:", site->server_->port());
-    site->channel_ = grpc::CreateChannel(site->address_, grpc::InsecureChannelCredentials());
+  static absl::StatusOr<std::unique_ptr<Site>> Start(const std::string& tag, int cameras) {
+    auto site = std::unique_ptr<Site>(new Site(tag));
+    if (absl::Status started = site->server_.Start(site->server_.Options(kSensor, kViewer, kAdmin)); !started.ok()) {
+      return started;
+    }
+    site->channel_ = site->server_.InsecureChannel();
     site->cameras_ = GridCameras(site->campus_, cameras);
     AdminClient admin(site->channel_, kAdmin);
     for (const GridCamera& cam : site->cameras_) {
@@ -177,10 +174,9 @@ class Site {
   FusionServer& server() { return *server_; }
 
  private:
-  Site() = default;
+  explicit Site(const std::string& tag) : server_(tag) {}
   scene::SyntheticCampus campus_ = scene::BuiltinCampus();
-  std::unique_ptr<FusionServer> server_;
-  std::string address_;
+  fixtures::LocalServer server_;
   std::shared_ptr<grpc::Channel> channel_;
   std::vector<GridCamera> cameras_;
   std::atomic<bool> stop_{false};

@@ -33,8 +33,7 @@ std::string Join(const std::set<std::string>& ids) {
 }
 
 TEST(DataSelection, ViewerLookingAtOneBlockReceivesOnlyTheStreamsItSees) {
-  const auto dir = std::filesystem::temp_directory_path() / ("ave_select_" + std::to_string(::getpid()));
-  auto site = Site::Start(dir, kCameras);
+  auto site = Site::Start("ave_select", kCameras);
   ASSERT_TRUE(site.ok()) << site.status();
   (*site)->StartStreaming(4);
 
@@ -116,12 +115,10 @@ TEST(DataSelection, ViewerLookingAtOneBlockReceivesOnlyTheStreamsItSees) {
   everything.Stop();
   (*site)->StopStreaming();
   site->reset();
-  std::filesystem::remove_all(dir);
 }
 
 TEST(DataSelection, ServerRefusesMalformedViewsByField) {
-  const auto dir = std::filesystem::temp_directory_path() / ("ave_select_bad_" + std::to_string(::getpid()));
-  auto site = Site::Start(dir, 2);
+  auto site = Site::Start("ave_select_bad", 2);
   ASSERT_TRUE(site.ok()) << site.status();
   auto stub = v1::SceneService::NewStub((*site)->channel());
   auto subscribe = [&](const v1::SubscribeRequest& request) {
@@ -145,7 +142,6 @@ TEST(DataSelection, ServerRefusesMalformedViewsByField) {
   EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_NE(s.error_message().find("singular"), std::string::npos) << s.error_message();
   site->reset();
-  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

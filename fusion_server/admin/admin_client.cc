@@ -12,76 +12,61 @@ absl::Status FromGrpc(const grpc::Status& status) {
 AdminClient::AdminClient(std::shared_ptr<grpc::Channel> channel, std::string admin_token)
     : stub_(v1::AdminService::NewStub(std::move(channel))), token_(std::move(admin_token)) {}
 
-void AdminClient::Authorize(grpc::ClientContext& context) const {
+template <typename Request, typename Response>
+absl::StatusOr<Response> AdminClient::Call(
+    grpc::Status (v1::AdminService::StubInterface::*method)(grpc::ClientContext*, const Request&, Response*),
+    const Request& request) {
+  grpc::ClientContext context;
   context.AddMetadata("authorization", "Bearer " + token_);
   context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  Response response;
+  if (absl::Status s = FromGrpc(((*stub_).*method)(&context, request, &response)); !s.ok()) return s;
+  return response;
 }
 
 absl::StatusOr<v1::Camera> AdminClient::AddCamera(const v1::Camera& camera) {
-  grpc::ClientContext context;
-  Authorize(context);
   v1::AddCameraRequest request;
   *request.mutable_camera() = camera;
-  v1::Camera response;
-  if (absl::Status s = FromGrpc(stub_->AddCamera(&context, request, &response)); !s.ok()) return s;
-  return response;
+  return Call(&v1::AdminService::StubInterface::AddCamera, request);
 }
 
 absl::StatusOr<v1::Camera> AdminClient::UpdateCamera(const v1::Camera& camera) {
-  grpc::ClientContext context;
-  Authorize(context);
   v1::UpdateCameraRequest request;
   *request.mutable_camera() = camera;
-  v1::Camera response;
-  if (absl::Status s = FromGrpc(stub_->UpdateCamera(&context, request, &response)); !s.ok()) return s;
-  return response;
+  return Call(&v1::AdminService::StubInterface::UpdateCamera, request);
 }
 
 absl::Status AdminClient::RemoveCamera(const std::string& id) {
-  grpc::ClientContext context;
-  Authorize(context);
   v1::RemoveCameraRequest request;
   request.set_id(id);
-  v1::RemoveCameraResponse response;
-  return FromGrpc(stub_->RemoveCamera(&context, request, &response));
+  return Call(&v1::AdminService::StubInterface::RemoveCamera, request).status();
 }
 
 absl::StatusOr<std::vector<v1::Camera>> AdminClient::ListCameras() {
-  grpc::ClientContext context;
-  Authorize(context);
-  v1::ListCamerasResponse response;
-  if (absl::Status s = FromGrpc(stub_->ListCameras(&context, v1::ListCamerasRequest(), &response)); !s.ok()) return s;
-  return std::vector<v1::Camera>(response.cameras().begin(), response.cameras().end());
+  absl::StatusOr<v1::ListCamerasResponse> response = Call(&v1::AdminService::StubInterface::ListCameras, v1::ListCamerasRequest());
+  if (!response.ok()) return response.status();
+  return std::vector<v1::Camera>(response->cameras().begin(), response->cameras().end());
 }
 
 absl::StatusOr<v1::IssueTokenResponse> AdminClient::IssueToken(const std::string& role, const std::string& camera_id,
                                                               const std::string& label) {
-  grpc::ClientContext context;
-  Authorize(context);
   v1::IssueTokenRequest request;
   request.set_role(role);
   request.set_camera_id(camera_id);
   request.set_label(label);
-  v1::IssueTokenResponse response;
-  if (absl::Status s = FromGrpc(stub_->IssueToken(&context, request, &response)); !s.ok()) return s;
-  return response;
+  return Call(&v1::AdminService::StubInterface::IssueToken, request);
 }
 
 absl::Status AdminClient::RevokeToken(const std::string& token_id) {
-  grpc::ClientContext context;
-  Authorize(context);
   v1::RevokeTokenRequest request;
   request.set_token_id(token_id);
-  v1::RevokeTokenResponse response;
-  return FromGrpc(stub_->RevokeToken(&context, request, &response));
+  return Call(&v1::AdminService::StubInterface::RevokeToken, request).status();
 }
 
 absl::StatusOr<std::vector<v1::TokenInfo>> AdminClient::ListTokens() {
-  grpc::ClientContext context;
-  Authorize(context);
-  v1::ListTokensResponse response;
-  if (absl::Status s = FromGrpc(stub_->ListTokens(&context, v1::ListTokensRequest(), &response)); !s.ok()) return s;
-  return std::vector<v1::TokenInfo>(response.tokens().begin(), response.tokens().end());
+  absl::StatusOr<v1::ListTokensResponse> response = Call(&v1::AdminService::StubInterface::ListTokens, v1::ListTokensRequest());
+  if (!response.ok()) return response.status();
+  return std::vector<v1::TokenInfo>(response->tokens().begin(), response->tokens().end());
 }
 
 v1::Camera CampusCameraRecord(const scene::CameraSpec& spec) {

@@ -27,7 +27,11 @@ class AdminClient {
   absl::StatusOr<std::vector<v1::TokenInfo>> ListTokens();
 
  private:
-  void Authorize(grpc::ClientContext& context) const;
+  // One unary call with the bearer token and a 10 s deadline: the response, or the call's status.
+  template <typename Request, typename Response>
+  absl::StatusOr<Response> Call(grpc::Status (v1::AdminService::StubInterface::*method)(grpc::ClientContext*, const Request&,
+                                                                                       Response*),
+                                const Request& request);
   std::unique_ptr<v1::AdminService::StubInterface> stub_;
   std::string token_;
 };

@@ -27,6 +27,19 @@ int Fail(const std::string& what) {
   return 1;
 }
 
+// Protobuf messages (cameras, token records) as one pretty JSON array on stdout.
+template <typename Messages>
+int PrintJsonArray(const Messages& messages) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const auto& m : messages) {
+    std::string json;
+    (void)google::protobuf::util::MessageToJsonString(m, &json);
+    out.push_back(nlohmann::json::parse(json));
+  }
+  std::cout << out.dump(2) << "\n";
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -101,27 +114,13 @@ int main(int argc, char** argv) {
   if (app.got_subcommand("list-tokens")) {
     auto tokens = client.ListTokens();
     if (!tokens.ok()) return Fail(std::string(tokens.status().message()));
-    nlohmann::json out = nlohmann::json::array();
-    for (const auto& t : *tokens) {
-      std::string json;
-      (void)google::protobuf::util::MessageToJsonString(t, &json);
-      out.push_back(nlohmann::json::parse(json));
-    }
-    std::cout << out.dump(2) << "\n";
-    return 0;
+    return PrintJsonArray(*tokens);
   }
 
   if (app.got_subcommand("list")) {
     auto cameras = client.ListCameras();
     if (!cameras.ok()) return Fail(std::string(cameras.status().message()));
-    nlohmann::json out = nlohmann::json::array();
-    for (const auto& c : *cameras) {
-      std::string json;
-      (void)google::protobuf::util::MessageToJsonString(c, &json);
-      out.push_back(nlohmann::json::parse(json));
-    }
-    std::cout << out.dump(2) << "\n";
-    return 0;
+    return PrintJsonArray(*cameras);
   }
   if (app.got_subcommand("remove-camera")) {
     if (absl::Status s = client.RemoveCamera(id); !s.ok()) return Fail(std::string(s.message()));

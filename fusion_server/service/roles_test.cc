@@ -56,23 +56,15 @@ const std::filesystem::path& Certs() {
 class Fixture : public ::testing::Test {
  protected:
   void StartServer(const net::TlsServerOptions& tls = {}, bool sensor_cert = false) {
-    dir_ = std::filesystem::temp_directory_path() /
-           ("ave_roles_test_" + std::to_string(::getpid()) + "_" + std::to_string(counter_++));
-    std::filesystem::create_directories(dir_);
     // No bootstrap sensor token: sensors use issued, per-camera tokens.
-    ServerOptions options = fixtures::LoopbackServer((dir_ / "ave.db").string(), "", kViewer, kAdmin);
+    ServerOptions options = server_.Options("", kViewer, kAdmin);
     options.tls = tls;
     options.sensor_requires_client_cert = sensor_cert;
     options.metrics_listen = "127.0.0.1:0";
     options.campus_grid_m = 8;
-    auto server = FusionServer::Start(options);
-    ASSERT_TRUE(server.ok()) << server.status();
-    server_ = std::move(*server);
-    address_ = "127.0.0.1:" + std::to_string(server_->port());
-  }
-  void TearDown() override {
-    server_.reset();
-    if (!dir_.empty()) std::filesystem::remove_all(dir_);
+    const absl::Status started = server_.Start(options);
+    ASSERT_TRUE(started.ok()) << started;
+    address_ = server_.address();
   }
 
   std::shared_ptr<grpc::Channel> Channel(const net::TlsClientOptions& tls = {}) {
@@ -148,9 +140,7 @@ class Fixture : public ::testing::Test {
     return reader->Finish();
   }
 
-  static inline int counter_ = 0;
-  std::filesystem::path dir_;
-  std::unique_ptr<FusionServer> server_;
+  fixtures::LocalServer server_{"ave_roles_test"};
   std::string address_;
 };
 
@@ -219,8 +209,8 @@ TEST_F(Roles, TokensAreStoredHashedSurviveRestartAndRevocationBites) {
   grpc::Status s;
   const std::string sensor = IssueToken(channel.get(), "sensor", "cam-a", &s);
   ASSERT_TRUE(s.ok());
-  const std::string store_path = (dir_ / "ave.db").string();
-  server_.reset();
+  const std::string store_path = server_.store_path();
+  server_.Stop();
   {
     auto store = store::Store::Open(store_path);
     ASSERT_TRUE(store.ok());
@@ -246,12 +236,11 @@ TEST_F(Roles, TokensAreStoredHashedSurviveRestartAndRevocationBites) {
     EXPECT_EQ(bytes.str().find(sensor), std::string::npos) << suffix;
   }
   // After a restart the issued token still works (loaded from the store), until revoked.
-  ServerOptions options = fixtures::LoopbackServer(store_path, "", "", kAdmin);
+  ServerOptions options = server_.Options("", "", kAdmin);
   options.campus_grid_m = 8;
-  auto server = FusionServer::Start(options);
-  ASSERT_TRUE(server.ok()) << server.status();
-  server_ = std::move(*server);
-  address_ = "127.0.0.1:" + std::to_string(server_->port());
+  const absl::Status restarted = server_.Start(options);
+  ASSERT_TRUE(restarted.ok()) << restarted;
+  address_ = server_.address();
   channel = Channel();
   EXPECT_TRUE(Stream(channel.get(), "cam-a", sensor).ok());
   s = AdminCall(channel.get(), kAdmin, [&](v1::AdminService::Stub& stub, grpc::ClientContext& context) {

@@ -30,26 +30,18 @@ constexpr char kAdmin[] = "admin-secret";
 class ServerTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = std::filesystem::temp_directory_path() / ("ave_server_test_" + std::to_string(::getpid()));
-    std::filesystem::create_directories(dir_);
-    ServerOptions options = fixtures::LoopbackServer((dir_ / "ave.db").string(), kSensor, kViewer, kAdmin);
+    ServerOptions options = server_.Options(kSensor, kViewer, kAdmin);
     options.frame_limits.max_jpeg_bytes = 1 << 20;
     options.max_message_bytes = 4 << 20;
     options.campus_grid_m = 8;
-    auto server = FusionServer::Start(options);
-    ASSERT_TRUE(server.ok()) << server.status();
-    server_ = std::move(*server);
-    channel_ = grpc::CreateChannel("127.0.0.1:" + std::to_string(server_->port()), grpc::InsecureChannelCredentials());
+    const absl::Status started = server_.Start(options);
+    ASSERT_TRUE(started.ok()) << started;
+    channel_ = server_.InsecureChannel();
     admin_ = v1::AdminService::NewStub(channel_);
     sensor_ = v1::SensorService::NewStub(channel_);
     scene_ = v1::SceneService::NewStub(channel_);
     for (const char* id : {"a", "b"}) ASSERT_TRUE(Admin(&v1::AdminService::Stub::AddCamera, CameraRecord(id)).ok());
   }
-  void TearDown() override {
-    server_.reset();
-    std::filesystem::remove_all(dir_);
-  }
-
   grpc::Status Admin(grpc::Status (v1::AdminService::Stub::*call)(grpc::ClientContext*, const v1::AddCameraRequest&, v1::Camera*),
                      const v1::Camera& camera, const std::string& token = kAdmin) {
     grpc::ClientContext context;
@@ -84,8 +76,7 @@ class ServerTest : public ::testing::Test {
     return f;
   }
 
-  std::filesystem::path dir_;
-  std::unique_ptr<FusionServer> server_;
+  fixtures::LocalServer server_{"ave_server_test"};
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<v1::AdminService::Stub> admin_;
   std::unique_ptr<v1::SensorService::Stub> sensor_;
@@ -225,13 +216,10 @@ TEST_F(ServerTest, ViewerGetsStaticModelAndLatestFrames) {
 }
 
 TEST_F(ServerTest, RestartReloadsCamerasFromTheStore) {
-  const std::string path = (dir_ / "ave.db").string();
-  server_.reset();
-  ServerOptions options = fixtures::LoopbackServer(path, kSensor, "", "");
-  auto server = FusionServer::Start(options);
-  ASSERT_TRUE(server.ok()) << server.status();
-  EXPECT_TRUE((*server)->state().FindCamera("a").has_value());
-  EXPECT_TRUE((*server)->state().FindCamera("b").has_value());
+  const absl::Status restarted = server_.Start(server_.Options(kSensor, "", ""));
+  ASSERT_TRUE(restarted.ok()) << restarted;
+  EXPECT_TRUE(server_->state().FindCamera("a").has_value());
+  EXPECT_TRUE(server_->state().FindCamera("b").has_value());
 }
 
 }  // namespace

@@ -1,5 +1,11 @@
 #pragma once
-// Small fixtures shared by the fusion_server service tests (test-only header).
+// Small fixtures shared by the fusion_server service tests, the end-to-end tests and the benches
+// that start a server in-process (test-only header).
+#include <unistd.h>
+
+#include <atomic>
+#include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -26,6 +32,61 @@ inline ServerOptions LoopbackServer(const std::string& store_path, const std::st
   options.admin_token = admin_token;
   return options;
 }
+
+// A FusionServer on a free loopback port with its store in a fresh temporary directory
+// (<tmp>/<tag>_<pid>_<n>): the start-up every service, end-to-end and bench test shares.
+//   fixtures::LocalServer server("ave_e2e");
+//   ServerOptions options = server.Options(kSensor, kViewer, kAdmin);  // then adjust
+//   ASSERT_TRUE(server.Start(options).ok());
+//   server->state() ...; server.address(); server.InsecureChannel();
+// Start() again restarts on the same store (a new port unless options.listen_address names one);
+// destruction stops the server and removes the directory.
+class LocalServer {
+ public:
+  explicit LocalServer(const std::string& tag)
+      : dir_(std::filesystem::temp_directory_path() /
+             (tag + "_" + std::to_string(::getpid()) + "_" + std::to_string(counter_++))) {
+    std::filesystem::create_directories(dir_);
+  }
+  ~LocalServer() {
+    Stop();
+    std::error_code ignored;
+    std::filesystem::remove_all(dir_, ignored);
+  }
+  LocalServer(const LocalServer&) = delete;
+  LocalServer& operator=(const LocalServer&) = delete;
+
+  // LoopbackServer options with the store in this directory (empty token = none).
+  ServerOptions Options(const std::string& sensor_token, const std::string& viewer_token,
+                        const std::string& admin_token) const {
+    return LoopbackServer(store_path(), sensor_token, viewer_token, admin_token);
+  }
+  // Starts a server with `options`, stopping the running one first.
+  absl::Status Start(const ServerOptions& options) {
+    Stop();
+    absl::StatusOr<std::unique_ptr<FusionServer>> server = FusionServer::Start(options);
+    if (!server.ok()) return server.status();
+    server_ = *std::move(server);
+    return absl::OkStatus();
+  }
+  void Stop() { server_.reset(); }
+
+  FusionServer* operator->() const { return server_.get(); }
+  FusionServer& operator*() const { return *server_; }
+  bool running() const { return server_ != nullptr; }
+  int port() const { return server_->port(); }
+  std::string address() const { return "127.0.0.1:" + std::to_string(server_->port()); }
+  std::shared_ptr<grpc::Channel> InsecureChannel() const {
+    return grpc::CreateChannel(address(), grpc::InsecureChannelCredentials());
+  }
+  const std::filesystem::path& dir() const { return dir_; }
+  std::string store_path() const { return (dir_ / "ave.db").string(); }
+
+ private:
+  static inline std::atomic<int> counter_{0};
+  std::filesystem::path dir_;
+  std::unique_ptr<FusionServer> server_;
+};
 
 // A real, decodable JPEG of the given size.
 inline std::string Jpeg(int w, int h) {

@@ -16,16 +16,12 @@ absl::StatusOr<PinholeIntrinsics> ParseIntrinsicsYaml(const std::string& text, c
     const y::Map m(root, "intrinsics");
     m.AllowOnly({"width", "height", "fx", "fy", "cx", "cy", "distortion", "rms_px", "images_used"});
     PinholeIntrinsics k;
-    k.width = static_cast<int>(m.Number("width"));
-    k.height = static_cast<int>(m.Number("height"));
-    m.RequireRange("width", m.Number("width"), 1, 100000);
-    m.RequireRange("height", m.Number("height"), 1, 100000);
-    k.fx = m.Number("fx");
-    k.fy = m.Number("fy");
+    k.width = m.IntIn("width", y::kRequired, 1, 100000);
+    k.height = m.IntIn("height", y::kRequired, 1, 100000);
+    k.fx = m.PositiveUpTo("fx", y::kRequired);
+    k.fy = m.PositiveUpTo("fy", y::kRequired);
     k.cx = m.Number("cx");
     k.cy = m.Number("cy");
-    m.RequirePositive("fx", k.fx);
-    m.RequirePositive("fy", k.fy);
     if (m.Has("distortion")) {
       const std::vector<double> d = m.Numbers("distortion", 5, 5);
       for (size_t i = 0; i < 5; ++i) k.distortion[i] = d[i];

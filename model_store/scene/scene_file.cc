@@ -188,24 +188,29 @@ std::vector<Eigen::Vector2d> Map::Points(const char* key, size_t min_points) con
 void Map::RequirePositive(const char* key, double value) const {
   if (!(value > 0)) Fail(Has(key) ? node_[key] : node_, Field(key), "must be > 0");
 }
-void Map::RequireNonNegative(const char* key, double value) const {
-  if (!(value >= 0)) Fail(Has(key) ? node_[key] : node_, Field(key), "must be >= 0");
-}
-double Map::NumberIn(const char* key, double fallback, double lo, double hi) const {
-  const double value = NumberOr(key, fallback);
+double Map::NumberIn(const char* key, std::optional<double> fallback, double lo, double hi) const {
+  const double value = fallback ? NumberOr(key, *fallback) : Number(key);
   RequireRange(key, value, lo, hi);
   return value;
 }
-double Map::PositiveUpTo(const char* key, double fallback, double hi) const {
-  const double value = NumberOr(key, fallback);
+int Map::IntIn(const char* key, std::optional<int> fallback, int lo, int hi) const {
+  if (!fallback && !Has(key)) Fail(node_, Field(key), "required");
+  const int value = IntOr(key, fallback.value_or(0));
+  RequireRange(key, value, lo, hi);
+  return value;
+}
+double Map::PositiveIn(const char* key, std::optional<double> fallback, double lo, double hi) const {
+  const double value = fallback ? NumberOr(key, *fallback) : Number(key);
   RequirePositive(key, value);
-  RequireRange(key, value, 0, hi);
+  RequireRange(key, value, lo, hi);
   return value;
 }
 void Map::RequireRange(const char* key, double value, double lo, double hi) const {
   if (!(value >= lo && value <= hi)) {
     std::ostringstream os;
-    os << "must be in [" << lo << ", " << hi << "]";
+    if (hi == kUnbounded) os << "must be >= " << lo;
+    else if (lo == -kUnbounded) os << "must be <= " << hi;
+    else os << "must be in [" << lo << ", " << hi << "]";
     Fail(Has(key) ? node_[key] : node_, Field(key), os.str());
   }
 }
@@ -226,36 +231,27 @@ Eigen::Vector3f Color(const Map& m, const char* key, const Eigen::Vector3f& fall
 
 void ParseTerrain(const Map& m, SyntheticCampus& campus) {
   m.AllowOnly({"half_extent_m", "analytic", "grid"});
-  campus.half_extent_m = m.NumberOr("half_extent_m", campus.half_extent_m);
-  m.RequireRange("half_extent_m", campus.half_extent_m, 1, 5000);
+  campus.half_extent_m = m.NumberIn("half_extent_m", campus.half_extent_m, 1, 5000);
   if (m.Has("analytic") && m.Has("grid")) Fail(m.Get("grid"), m.Field("grid"), "give either analytic or grid, not both");
   Terrain& t = campus.terrain;
   if (m.Has("analytic")) {
     const Map a(m.Get("analytic"), m.Field("analytic"));
     a.AllowOnly({"amplitude_m", "length_x_m", "length_y_m", "tilt_x", "tilt_y"});
     t.kind = Terrain::Kind::kAnalytic;
-    t.amplitude_m = a.NumberOr("amplitude_m", t.amplitude_m);
-    t.length_x_m = a.NumberOr("length_x_m", t.length_x_m);
-    t.length_y_m = a.NumberOr("length_y_m", t.length_y_m);
-    t.tilt_x = a.NumberOr("tilt_x", t.tilt_x);
-    t.tilt_y = a.NumberOr("tilt_y", t.tilt_y);
-    a.RequireRange("amplitude_m", t.amplitude_m, -1000, 1000);
-    a.RequirePositive("length_x_m", t.length_x_m);
-    a.RequirePositive("length_y_m", t.length_y_m);
-    a.RequireRange("tilt_x", t.tilt_x, -2, 2);
-    a.RequireRange("tilt_y", t.tilt_y, -2, 2);
+    t.amplitude_m = a.NumberIn("amplitude_m", t.amplitude_m, -1000, 1000);
+    t.length_x_m = a.PositiveUpTo("length_x_m", t.length_x_m);
+    t.length_y_m = a.PositiveUpTo("length_y_m", t.length_y_m);
+    t.tilt_x = a.NumberIn("tilt_x", t.tilt_x, -2, 2);
+    t.tilt_y = a.NumberIn("tilt_y", t.tilt_y, -2, 2);
   }
   if (m.Has("grid")) {
     const Map g(m.Get("grid"), m.Field("grid"));
     g.AllowOnly({"origin", "spacing_m", "cols", "rows", "heights_m"});
     t.kind = Terrain::Kind::kGrid;
     t.grid_origin_m = g.Vec2("origin");
-    t.grid_spacing_m = g.Number("spacing_m");
-    g.RequirePositive("spacing_m", t.grid_spacing_m);
-    t.grid_cols = g.IntOr("cols", 0);
-    t.grid_rows = g.IntOr("rows", 0);
-    g.RequireRange("cols", t.grid_cols, 2, 100000);
-    g.RequireRange("rows", t.grid_rows, 2, 100000);
+    t.grid_spacing_m = g.PositiveUpTo("spacing_m", kRequired);
+    t.grid_cols = g.IntIn("cols", 0, 2, 100000);
+    t.grid_rows = g.IntIn("rows", 0, 2, 100000);
     const size_t n = static_cast<size_t>(t.grid_cols) * t.grid_rows;
     t.heights_m = g.Numbers("heights_m", n, n);
   }
@@ -284,8 +280,7 @@ BuildingPart ParsePart(const Map& m) {
   }
   if (!(p.size_m.x() > 0 && p.size_m.y() > 0)) Fail(m.Get("size"), m.Field("size"), "must be > 0 in both directions");
   p.yaw_rad = m.NumberOr("yaw_deg", 0) * kDeg;
-  p.height_m = m.Number("height_m");
-  m.RequirePositive("height_m", p.height_m);
+  p.height_m = m.PositiveUpTo("height_m", kRequired);
   const double short_side = std::min(p.size_m.x(), p.size_m.y());
   double default_rise = 0;
   switch (p.kind) {
@@ -358,23 +353,18 @@ CameraSpec ParseCamera(const Map& m, const SyntheticCampus& campus, size_t index
   cam.id = m.String("id");
   if (cam.id.empty() || cam.id.find_first_of("# \t/") != std::string::npos) Fail(m.Get("id"), m.Field("id"), "must be non-empty without '#', '/' or blanks");
   cam.name = m.StringOr("name", cam.id);
-  const int width = m.IntOr("width", 640), height = m.IntOr("height", 480);
-  m.RequireRange("width", width, 16, 8192);
-  m.RequireRange("height", height, 16, 8192);
+  const int width = m.IntIn("width", 640, 16, 8192), height = m.IntIn("height", 480, 16, 8192);
   const bool has_fx = m.Has("fx") || m.Has("fy") || m.Has("cx") || m.Has("cy");
   if (has_fx && m.Has("fov_deg")) Fail(m.Get("fov_deg"), m.Field("fov_deg"), "give fov_deg or fx/fy/cx/cy, not both");
   if (has_fx) {
     cam.intrinsics.width = width;
     cam.intrinsics.height = height;
-    cam.intrinsics.fx = m.Number("fx");
-    cam.intrinsics.fy = m.NumberOr("fy", cam.intrinsics.fx);
+    cam.intrinsics.fx = m.PositiveUpTo("fx", kRequired);
+    cam.intrinsics.fy = m.PositiveUpTo("fy", cam.intrinsics.fx);
     cam.intrinsics.cx = m.NumberOr("cx", 0.5 * (width - 1));
     cam.intrinsics.cy = m.NumberOr("cy", 0.5 * (height - 1));
-    m.RequirePositive("fx", cam.intrinsics.fx);
-    m.RequirePositive("fy", cam.intrinsics.fy);
   } else {
-    const double fov = m.NumberOr("fov_deg", 70);
-    m.RequireRange("fov_deg", fov, 1, 170);
+    const double fov = m.NumberIn("fov_deg", 70, 1, 170);
     cam.intrinsics = PinholeIntrinsics::FromFov(width, height, fov);
   }
   if (m.Has("distortion")) {
@@ -385,9 +375,7 @@ CameraSpec ParseCamera(const Map& m, const SyntheticCampus& campus, size_t index
     }
   }
   if (const std::string why = cam.intrinsics.Check(); !why.empty()) Fail(m.node(), m.field(), "intrinsics: " + why);
-  cam.fps = m.NumberOr("fps", 15);
-  m.RequirePositive("fps", cam.fps);
-  m.RequireRange("fps", cam.fps, 1e-3, 1000);
+  cam.fps = m.PositiveIn("fps", 15, 1e-3, 1000);
 
   if (m.Has("path")) {
     if (m.Has("position") || m.Has("look_at")) Fail(m.Get("path"), m.Field("path"), "a camera has either a path or position + look_at, not both");
@@ -430,8 +418,7 @@ Mover ParseMover(const Map& m, MoverKind kind) {
   Mover mover;
   mover.kind = kind;
   mover.loop_m = m.Points("path", 1);
-  mover.speed_mps = m.NumberOr("speed_mps", kind == MoverKind::kPerson ? 1.4 : 6.0);
-  m.RequireRange("speed_mps", mover.speed_mps, 0, 100);
+  mover.speed_mps = m.NumberIn("speed_mps", kind == MoverKind::kPerson ? 1.4 : 6.0, 0, 100);
   mover.start_offset_m = m.NumberOr("start_offset_m", 0);
   mover.size_m = kind == MoverKind::kPerson ? Eigen::Vector3d(0.6, 0.4, 1.8) : Eigen::Vector3d(1.8, 4.5, 1.5);
   if (m.Has("size")) {
@@ -469,8 +456,7 @@ SyntheticCampus ParseScene(const YAML::Node& root, const std::set<std::string>& 
       m.AllowOnly({"points", "half_width_m"});
       Road road;
       road.points_m = m.Points("points", 2);
-      road.half_width_m = m.NumberOr("half_width_m", 4);
-      m.RequireRange("half_width_m", road.half_width_m, 0.5, 50);
+      road.half_width_m = m.NumberIn("half_width_m", 4, 0.5, 50);
       campus.roads.push_back(std::move(road));
     }
   }
@@ -493,12 +479,9 @@ SyntheticCampus ParseScene(const YAML::Node& root, const std::set<std::string>& 
       m.AllowOnly({"position", "trunk_height_m", "trunk_radius_m", "crown_radius_m"});
       Tree t;
       t.position_m = m.Vec2("position");
-      t.trunk_height_m = m.NumberOr("trunk_height_m", t.trunk_height_m);
-      t.trunk_radius_m = m.NumberOr("trunk_radius_m", t.trunk_radius_m);
-      t.crown_radius_m = m.NumberOr("crown_radius_m", t.crown_radius_m);
-      m.RequireRange("trunk_height_m", t.trunk_height_m, 0.1, 100);
-      m.RequireRange("trunk_radius_m", t.trunk_radius_m, 0.01, 5);
-      m.RequireRange("crown_radius_m", t.crown_radius_m, 0.1, 50);
+      t.trunk_height_m = m.NumberIn("trunk_height_m", t.trunk_height_m, 0.1, 100);
+      t.trunk_radius_m = m.NumberIn("trunk_radius_m", t.trunk_radius_m, 0.01, 5);
+      t.crown_radius_m = m.NumberIn("crown_radius_m", t.crown_radius_m, 0.1, 50);
       campus.trees.push_back(t);
     }
   }
@@ -544,8 +527,7 @@ SyntheticCampus ParseScene(const YAML::Node& root, const std::set<std::string>& 
       const Map m(list[i], Indexed(key, i));
       Mover mover = ParseMover(m, kind);
       if (m.Has("id")) {
-        const int id = m.IntOr("id", 0);
-        m.RequireRange("id", id, 1, 1'000'000'000);
+        const int id = m.IntIn("id", 0, 1, 1'000'000'000);
         mover.id = static_cast<uint32_t>(id);
       } else {
         while (mover_ids.count(next_id)) ++next_id;

@@ -1,8 +1,8 @@
 #pragma once
 // Scenario files, scene part (docs/SCENARIOS.md): terrain, roads, buildings as primitives, trees,
 // static objects, cameras and movers read from YAML into a SyntheticCampus. The simulator part of
-// the same file (seed, effects, sensors) is read by sensor_agent/sim/scenario.h, which builds on
-// this. Errors name the file, line and field ("campus.yaml:42: cameras[3].fps: must be > 0").
+// the same file (seed, effects, sensors) is read by the simulator's scenario.h (ave_scenario), which
+// builds on this. Errors name the file, line and field ("campus.yaml:42: cameras[3].fps: must be > 0").
 //
 // The bundled scenarios (scenarios/*.yaml next to this file) are compiled into the library, so no
 // executable needs files at run time.

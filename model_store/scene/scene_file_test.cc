@@ -1,12 +1,14 @@
 #include "model_store/scene/scene_file.h"
 
 #include <cmath>
+#include <functional>
 #include <set>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include "model_store/geometry/raycast.h"
+#include "model_store/scene/yaml_fields.h"
 
 namespace ave::scene {
 namespace {
@@ -284,6 +286,38 @@ TEST(SceneFile, UnknownScenarioNamesTheKnownOnes) {
   EXPECT_THAT(std::string(s.status().message()), HasSubstr("campus"));
   EXPECT_FALSE(ReadScenarioSource("/no/such/file.yaml").ok());
   EXPECT_EQ(ReadScenarioSource("minimal")->label, "minimal.yaml");
+}
+
+// The one-call numeric fields every reader (scene, simulator, intrinsics) uses: value or fallback,
+// presence, whole numbers, open-ended ranges and the "> 0" message, each error on the key's line
+// (the map's own line when the key is absent).
+TEST(YamlFields, NumericFieldsCheckPresenceWholeNumbersAndRanges) {
+  const YAML::Node root = yaml::ParseYamlText("a: 2.5\nb: 0\nc: 7\nd: -1\n");
+  const yaml::Map m(root, "x");
+  auto error = [](const std::function<void()>& read) -> std::string {
+    try {
+      read();
+    } catch (const yaml::FieldError& e) {
+      return std::to_string(e.line) + " " + e.field + ": " + e.what();
+    }
+    return "accepted";
+  };
+  EXPECT_EQ(m.NumberIn("a", 1, 0, 3), 2.5);
+  EXPECT_EQ(m.NumberIn("absent", 1, 0, 3), 1);
+  EXPECT_EQ(m.IntIn("c", 1, 0, 10), 7);
+  EXPECT_EQ(m.PositiveUpTo("c", yaml::kRequired), 7);
+  EXPECT_EQ(m.PositiveIn("a", yaml::kRequired, 1, 3), 2.5);
+  EXPECT_EQ(error([&] { m.NumberIn("a", 1, 3, 4); }), "1 x.a: must be in [3, 4]");
+  EXPECT_EQ(error([&] { m.NumberIn("absent", 9, 3, 4); }), "1 x.absent: must be in [3, 4]");
+  EXPECT_EQ(error([&] { m.NumberIn("absent", yaml::kRequired, 0, 10); }), "1 x.absent: required");
+  EXPECT_EQ(error([&] { m.IntIn("absent", yaml::kRequired, 0, 10); }), "1 x.absent: required");
+  EXPECT_EQ(error([&] { m.IntIn("a", 1, 0, 10); }), "1 x.a: must be a whole number");
+  EXPECT_EQ(error([&] { m.IntIn("c", 1, 8, 10); }), "3 x.c: must be in [8, 10]");
+  EXPECT_EQ(error([&] { m.PositiveIn("b", 1, 0.5, 4); }), "2 x.b: must be > 0");
+  EXPECT_EQ(error([&] { m.PositiveIn("a", 1, 3, 4); }), "1 x.a: must be in [3, 4]");
+  EXPECT_EQ(error([&] { m.PositiveUpTo("d", 1); }), "4 x.d: must be > 0");
+  EXPECT_EQ(error([&] { m.NumberIn("d", 0, 0, yaml::kUnbounded); }), "4 x.d: must be >= 0");
+  EXPECT_EQ(error([&] { m.NumberIn("c", 0, -yaml::kUnbounded, 5); }), "3 x.c: must be <= 5");
 }
 
 }  // namespace

@@ -4,10 +4,12 @@
 // range, and every error carries the document line and the field path, e.g.
 //   campus.yaml:42: cameras[3].fps: must be > 0
 //
-// Used by the scene part (scene_file.cc) and the simulator part (sensor_agent/sim/scenario.cc) of
-// one scenario file. Parsing functions throw FieldError; the public entry points catch it and
-// return absl::Status (FormatFieldError). Include only from .cc files: it pulls in yaml-cpp.
+// Used by the scene part (scene_file.cc) and the simulator part (the simulator's scenario.cc,
+// target ave_scenario) of one scenario file. Parsing functions throw FieldError; the public entry
+// points catch it and return absl::Status (FormatFieldError). Include only from .cc files: it
+// pulls in yaml-cpp.
 #include <initializer_list>
+#include <limits>
 #include <optional>
 #include <set>
 #include <stdexcept>
@@ -35,6 +37,11 @@ std::string FormatFieldError(const std::string& file, const FieldError& e);
 int LineOf(const YAML::Node& node);
 
 [[noreturn]] void Fail(const YAML::Node& node, const std::string& field, const std::string& message);
+
+// For the *In / *UpTo fields: no fallback, the key must be there.
+inline constexpr std::nullopt_t kRequired = std::nullopt;
+// An open end of a range ("must be >= lo" / "must be <= hi").
+inline constexpr double kUnbounded = std::numeric_limits<double>::infinity();
 
 // A YAML mapping at field path `field` (e.g. "cameras[3]").
 class Map {
@@ -64,14 +71,19 @@ class Map {
   Eigen::Vector2d Vec2(const char* key) const;
   std::vector<Eigen::Vector2d> Points(const char* key, size_t min_points) const;
 
-  // Range checks on a value read from `key` (for the error's line).
+  // Range checks on a value read from `key` (for the error's line). RequireRange says
+  // "must be in [lo, hi]", or "must be >= lo" / "must be <= hi" when the other end is kUnbounded.
   void RequirePositive(const char* key, double value) const;
-  void RequireNonNegative(const char* key, double value) const;
   void RequireRange(const char* key, double value, double lo, double hi) const;
-  // The common numeric field in one call: NumberOr, then RequireRange (NumberIn), or
-  // RequirePositive and RequireRange(0, hi) (PositiveUpTo).
-  double NumberIn(const char* key, double fallback, double lo, double hi) const;
-  double PositiveUpTo(const char* key, double fallback, double hi) const;
+  // The common numeric field in one call: the value at `key` (`fallback` when absent; kRequired:
+  // absent is an error), checked against [lo, hi]. IntIn also wants a whole number; the Positive
+  // forms first say "must be > 0" for zero and negative values, then check the range.
+  double NumberIn(const char* key, std::optional<double> fallback, double lo, double hi) const;
+  int IntIn(const char* key, std::optional<int> fallback, int lo, int hi) const;
+  double PositiveIn(const char* key, std::optional<double> fallback, double lo, double hi) const;
+  double PositiveUpTo(const char* key, std::optional<double> fallback, double hi = kUnbounded) const {
+    return PositiveIn(key, fallback, 0, hi);
+  }
 
  private:
   YAML::Node node_;

@@ -18,7 +18,6 @@ using internal::LabelledMesh;
 using internal::LidarHit;
 
 constexpr double kPi = 3.14159265358979323846;
-constexpr double kTerrainResolution_m = 0.5;
 constexpr double kAircraftSpeed_mps = 60;
 constexpr double kLineTurn_s = 90;        // between flight lines
 constexpr double kSideOverlap = 0.2;      // of the swath
@@ -90,7 +89,7 @@ absl::Status SimulateAirborneLidar(const scene::SyntheticCampus& campus, const A
   for (const auto& b : campus.buildings) highest = std::max(highest, campus.BuildingTop(b));
   if (spec.altitude_m <= highest + 50) return absl::InvalidArgumentError("airborne lidar: altitude_m must clear the tallest building by 50 m");
 
-  const LabelledMesh static_mesh = internal::BuildStaticLidarMesh(campus, kTerrainResolution_m);
+  const LabelledMesh static_mesh = internal::BuildStaticLidarMesh(campus, internal::kLidarTerrainResolution_m);
   const EffectParams* range_noise = effects.Find(EffectKind::kLidarRangeNoise);
   const EffectParams* missing = effects.Find(EffectKind::kLidarMissingReturns);
   const EffectParams* by_material = effects.Find(EffectKind::kLidarIntensityByMaterial);

@@ -33,6 +33,10 @@ struct LabelledMesh {
   std::vector<uint32_t> label;  // per triangle
 };
 
+// Terrain facets at 0.5 m stay within ~0.2 mm of the analytic hills: both LiDARs' points lie on
+// the surface.
+inline constexpr double kLidarTerrainResolution_m = 0.5;
+
 // The static campus (terrain at `terrain_resolution_m`, buildings, vegetation, static objects).
 LabelledMesh BuildStaticLidarMesh(const scene::SyntheticCampus& campus, double terrain_resolution_m);
 // Movers at t_s as boxes, matching the simulated camera's shapes (a person is a body and a head,

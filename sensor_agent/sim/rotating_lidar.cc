@@ -16,8 +16,6 @@ using internal::LabelledMesh;
 using internal::LidarHit;
 
 constexpr double kPi = 3.14159265358979323846;
-// Terrain facets at 0.5 m stay within ~0.2 mm of the analytic hills: points lie on the surface.
-constexpr double kTerrainResolution_m = 0.5;
 constexpr char kFrameMagic[8] = {'A', 'V', 'E', 'L', 'I', 'D', 'R', '1'};
 constexpr size_t kFrameHeaderBytes = 8 + 4 + 8 + 4 + 4;  // magic, version, t_ns, point count, record bytes
 constexpr size_t kFrameRecordBytes = 30;
@@ -294,7 +292,7 @@ std::string RotatingLidarSpec::Check() const {
 LidarFrame SimulateRotatingLidarFrame(const scene::SyntheticCampus& campus, const RotatingLidarSpec& spec, const EffectSet& effects,
                                       uint64_t seed, double t_s) {
   if (!spec.Check().empty() || !std::isfinite(t_s)) return {};
-  const LabelledMesh static_mesh = internal::BuildStaticLidarMesh(campus, kTerrainResolution_m);
+  const LabelledMesh static_mesh = internal::BuildStaticLidarMesh(campus, internal::kLidarTerrainResolution_m);
   return SimulateFrame(campus, static_mesh, spec, effects, seed, t_s);
 }
 
@@ -306,7 +304,7 @@ absl::Status WriteRotatingLidar(const scene::SyntheticCampus& campus, const Rota
   }
   if (const std::string why = internal::MakeDirs(out_dir); !why.empty()) return absl::InternalError(why);
   const int frames = std::max(1, static_cast<int>(std::floor(duration_s * spec.rate_hz + 1e-9)));
-  const LabelledMesh static_mesh = internal::BuildStaticLidarMesh(campus, kTerrainResolution_m);
+  const LabelledMesh static_mesh = internal::BuildStaticLidarMesh(campus, internal::kLidarTerrainResolution_m);
 
   std::ofstream pcap_file(out_dir + "/velodyne.pcap", std::ios::binary);
   std::ofstream index(out_dir + "/frames.csv");

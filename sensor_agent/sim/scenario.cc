@@ -12,6 +12,7 @@ namespace ave::sim {
 namespace {
 
 using scene::yaml::Fail;
+using scene::yaml::kUnbounded;
 using scene::yaml::Map;
 
 std::string Indexed(const std::string& list, size_t i) { return list + "[" + std::to_string(i) + "]"; }
@@ -95,9 +96,7 @@ void ParseSensors(const Map& sensors, Scenario& s) {
       if (!s.world.FindCamera(spec.camera_id)) Fail(m.Get("camera"), m.Field("camera"), "no camera '" + spec.camera_id + "' in this scenario");
       spec.gps_rate_hz = m.PositiveUpTo("gps_rate_hz", spec.gps_rate_hz, 100);
       spec.imu_rate_hz = m.PositiveUpTo("imu_rate_hz", spec.imu_rate_hz, 2000);
-      spec.duration_s = m.NumberOr("duration_s", spec.duration_s);
-      m.RequireNonNegative("duration_s", spec.duration_s);
-      m.RequireRange("duration_s", spec.duration_s, 0, 86400);
+      spec.duration_s = m.NumberIn("duration_s", spec.duration_s, 0, 86400);
       s.gps_imu.push_back(spec);
     }
   }
@@ -113,12 +112,10 @@ void ParseSensors(const Map& sensors, Scenario& s) {
       if (!ids.insert(spec.id).second) Fail(m.Get("id"), m.Field("id"), "duplicate LiDAR id '" + spec.id + "'");
       spec.position_m = PlacedPoint(m, s.world, 2.0);
       spec.rate_hz = m.PositiveUpTo("rate_hz", spec.rate_hz, 50);
-      spec.rings = m.IntOr("rings", spec.rings);
-      m.RequireRange("rings", spec.rings, 1, 64);
+      spec.rings = m.IntIn("rings", spec.rings, 1, 64);
       spec.fov_up_deg = m.NumberIn("fov_up_deg", spec.fov_up_deg, -89, 89);
       spec.fov_down_deg = m.NumberIn("fov_down_deg", spec.fov_down_deg, -89, 89);
-      spec.azimuth_steps = m.IntOr("azimuth_steps", spec.azimuth_steps);
-      m.RequireRange("azimuth_steps", spec.azimuth_steps, 16, 36000);
+      spec.azimuth_steps = m.IntIn("azimuth_steps", spec.azimuth_steps, 16, 36000);
       spec.max_range_m = m.PositiveUpTo("max_range_m", spec.max_range_m, 130);
       if (!(spec.fov_down_deg < spec.fov_up_deg)) Fail(m.Has("fov_down_deg") ? m.Get("fov_down_deg") : m.node(), m.Field("fov_down_deg"), "must be below fov_up_deg");
       const int b = s.world.BuildingAt(spec.position_m.x(), spec.position_m.y());
@@ -135,28 +132,20 @@ void ParseSensors(const Map& sensors, Scenario& s) {
     AirborneLidarSpec spec;
     spec.altitude_m = m.PositiveUpTo("altitude_m", spec.altitude_m, 10000);
     spec.swath_half_angle_deg = m.PositiveUpTo("swath_half_angle_deg", spec.swath_half_angle_deg, 59.9);
-    spec.point_spacing_m = m.PositiveUpTo("point_spacing_m", spec.point_spacing_m, 100);
-    m.RequireRange("point_spacing_m", spec.point_spacing_m, 0.05, 100);
+    spec.point_spacing_m = m.PositiveIn("point_spacing_m", spec.point_spacing_m, 0.05, 100);
     s.airborne_lidar = spec;
   }
   if (sensors.Has("studio")) {
     const Map m(sensors.Get("studio"), sensors.Field("studio"));
     m.AllowOnly({"cameras", "radius_m", "overhead", "fps", "duration_s", "width", "height"});
     StudioSpec spec;
-    spec.cameras = m.IntOr("cameras", spec.cameras);
-    spec.radius_m = m.NumberOr("radius_m", spec.radius_m);
+    spec.cameras = m.IntIn("cameras", spec.cameras, 1, 64);
+    spec.radius_m = m.NumberIn("radius_m", spec.radius_m, 1.001, 50);
     spec.overhead = m.BoolOr("overhead", spec.overhead);
-    spec.fps = m.NumberOr("fps", spec.fps);
-    spec.duration_s = m.NumberOr("duration_s", spec.duration_s);
-    spec.width = m.IntOr("width", spec.width);
-    spec.height = m.IntOr("height", spec.height);
-    m.RequireRange("cameras", spec.cameras, 1, 64);
-    m.RequireRange("radius_m", spec.radius_m, 1.001, 50);
-    m.RequirePositive("fps", spec.fps);
-    m.RequireRange("fps", spec.fps, 0, 120);
-    m.RequireNonNegative("duration_s", spec.duration_s);
-    m.RequireRange("width", spec.width, 16, 8192);
-    m.RequireRange("height", spec.height, 16, 8192);
+    spec.fps = m.PositiveUpTo("fps", spec.fps, 120);
+    spec.duration_s = m.NumberIn("duration_s", spec.duration_s, 0, kUnbounded);
+    spec.width = m.IntIn("width", spec.width, 16, 8192);
+    spec.height = m.IntIn("height", spec.height, 16, 8192);
     s.studio = spec;
   }
 }

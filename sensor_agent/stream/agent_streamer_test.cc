@@ -3,7 +3,6 @@
 #include "sensor_agent/source/fake_source.h"
 #include "sensor_agent/stream/agent_streamer.h"
 
-#include <unistd.h>
 
 #include <filesystem>
 #include <thread>
@@ -14,6 +13,7 @@
 #include "fusion_server/admin/admin_client.h"
 #include "fusion_server/core/convert.h"
 #include "fusion_server/service/server.h"
+#include "fusion_server/service/test_fixtures.h"
 #include "model_store/common/log.h"
 
 namespace ave {
@@ -49,38 +49,22 @@ TEST(ClockOffsetEstimator, TakesTheSmallestRoundTrip) {
 class AgentFaults : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = std::filesystem::temp_directory_path() / ("ave_agent_test_" + std::to_string(::getpid()));
-    std::filesystem::create_directories(dir_);
     Start("127.0.0.1:0");
-    port_ = server_->port();
-    v1::Camera camera;
-    camera.set_id("cam");
-    camera.set_name("cam");
-    *camera.mutable_intrinsics() = ToProto(PinholeIntrinsics::FromFov(64, 48, 60));
-    *camera.mutable_mounting_pose() = ToProto(LookAt({0, 0, 10}, {10, 0, 0}));
-    camera.set_enabled(true);
-    AdminClient admin(grpc::CreateChannel(Address(), grpc::InsecureChannelCredentials()), "admin");
-    ASSERT_TRUE(admin.AddCamera(camera).ok());
+    port_ = server_.port();
+    AdminClient admin(server_.InsecureChannel(), "admin");
+    ASSERT_TRUE(admin.AddCamera(fixtures::CameraRecord("cam")).ok());
   }
-  void TearDown() override {
-    server_.reset();
-    std::filesystem::remove_all(dir_);
-  }
+  // Starts the server on `listen` (the same store each time).
   void Start(const std::string& listen) {
-    ServerOptions options;
+    ServerOptions options = server_.Options("sensor", "", "admin");
     options.listen_address = listen;
-    options.store_path = (dir_ / "ave.db").string();
-    options.sensor_token = "sensor";
-    options.admin_token = "admin";
     options.campus_grid_m = 8;
-    auto server = FusionServer::Start(options);
-    ASSERT_TRUE(server.ok()) << server.status();
-    server_ = std::move(*server);
+    const absl::Status started = server_.Start(options);
+    ASSERT_TRUE(started.ok()) << started;
   }
   std::string Address() const { return "127.0.0.1:" + std::to_string(port_); }
 
-  std::filesystem::path dir_;
-  std::unique_ptr<FusionServer> server_;
+  fixtures::LocalServer server_{"ave_agent_test"};
   int port_ = 0;
 };
 
@@ -95,7 +79,7 @@ TEST_F(AgentFaults, OutageMetadataIsReplayedInOrderAndSkewIsCorrected) {
   options.backoff_initial = std::chrono::milliseconds(100);
   options.backoff_max = std::chrono::milliseconds(400);
   options.metadata_in_memory = 5;  // force a spill to disk during the outage
-  options.spill_path = (dir_ / "cam.meta").string();
+  options.spill_path = (server_.dir() / "cam.meta").string();
   options.clock = sensor_clock;
   AgentStreamer streamer(options, std::make_unique<FakeSource>(sensor_clock));
   std::atomic<bool> stop{false};
@@ -109,7 +93,7 @@ TEST_F(AgentFaults, OutageMetadataIsReplayedInOrderAndSkewIsCorrected) {
   };
   ASSERT_TRUE(wait_for([&] { return streamer.stats().frames_acked >= 10; }, std::chrono::seconds(20)));
 
-  server_.reset();  // outage: ~1.5 s, the agent keeps capturing
+  server_.Stop();  // outage: ~1.5 s, the agent keeps capturing
   std::this_thread::sleep_for(std::chrono::milliseconds(1500));
   EXPECT_GT(streamer.stats().metadata_buffered, 10);
   const auto back = std::chrono::steady_clock::now();

@@ -20,7 +20,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <ctime>
 #include <iostream>
 #include <map>
 #include <memory>
@@ -36,6 +35,7 @@
 #include <opencv2/video/background_segm.hpp>
 
 #include "fusion_server/core/placement.h"
+#include "model_store/common/cpu_clock.h"
 #include "sensor_agent/detect/detector.h"
 #include "sensor_agent/detect/segment.h"
 #include "sensor_agent/sim/camera_effects.h"
@@ -47,19 +47,7 @@ namespace ave::bench {
 namespace {
 
 // Methods are timed in CPU time of this thread (the per-core cost: other processes on shared
-// cores do not count), through the std::chrono clock interface.
-struct ThreadCpuClock {
-  using duration = std::chrono::nanoseconds;
-  using rep = duration::rep;
-  using period = duration::period;
-  using time_point = std::chrono::time_point<ThreadCpuClock>;
-  static constexpr bool is_steady = true;
-  static time_point now() {
-    timespec ts{};
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-    return time_point(duration(static_cast<rep>(ts.tv_sec) * 1000000000 + ts.tv_nsec));
-  }
-};
+// cores do not count).
 using Clock = ThreadCpuClock;
 
 struct DetectOptions {

@@ -22,8 +22,8 @@
 #include <opencv2/imgproc.hpp>
 
 #include "model_store/environment/environment.h"
-#include "model_store/environment/environment_truth.h"
 #include "tests/bench/bench.h"
+#include "tests/truth/environment_truth.h"
 
 namespace ave::bench {
 namespace {

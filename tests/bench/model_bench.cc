@@ -7,7 +7,6 @@
 // the grey opening next to OpenCV's morphologyEx on the same image (ratio); and gridding + ground
 // classification throughput at 1, 3 and 10 million points on one core. Writes a PNG plot.
 #include <malloc.h>
-#include <time.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -26,12 +25,13 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "model_store/buildings/survey_truth.h"
+#include "model_store/common/cpu_clock.h"
 #include "model_store/lidar/las.h"
 #include "model_store/pipeline/static_model.h"
-#include "model_store/pipeline/terrain_score.h"
 #include "sensor_agent/sim/scenario.h"
 #include "tests/bench/bench.h"
+#include "tests/truth/survey_truth.h"
+#include "tests/truth/terrain_score.h"
 
 namespace ave::bench {
 namespace {
@@ -54,11 +54,7 @@ std::vector<double> ParseList(const std::string& text) {
 
 double Now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
 // CPU seconds of this thread: the per-core cost, unaffected by other processes on a shared machine.
-double CpuNow() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return ts.tv_sec + ts.tv_nsec * 1e-9;
-}
+double CpuNow() { return ThreadCpuSeconds(); }
 
 // Peak resident memory since the last reset (Linux: /proc/self/clear_refs "5" resets VmHWM).
 long ReadStatusKb(const char* key) {

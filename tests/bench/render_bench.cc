@@ -13,7 +13,6 @@
 //      render time, as a ratio.
 // Times are wall clock per frame (readback included) and process CPU time per frame (all
 // llvmpipe threads), since the machine is shared: frames/s = 1000 / wall ms.
-#include <sys/resource.h>
 
 #include <algorithm>
 #include <chrono>
@@ -30,6 +29,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "model_store/common/cpu_clock.h"
 #include "model_store/geometry/bvh.h"
 #include "model_store/geometry/camera.h"
 #include "sensor_agent/sim/scenario.h"
@@ -66,11 +66,6 @@ std::vector<int> ParseInts(const std::string& text) {
   return out;
 }
 
-double CpuSeconds() {
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
-  return usage.ru_utime.tv_sec + usage.ru_stime.tv_sec + 1e-6 * (usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
-}
 
 double Load1() {
   double load = 0;
@@ -200,7 +195,7 @@ template <typename F>
 Timing TimeFrames(viewer::Renderer& renderer, viewer::HeadlessContext& context, const std::vector<viewer::View>& views,
                   int frames, F before_frame) {
   const uint64_t shadows_before = renderer.stats().shadow_map_renders;
-  const double cpu_start = CpuSeconds();
+  const double cpu_start = ProcessCpuSeconds();
   const auto start = std::chrono::steady_clock::now();
   for (int f = 0; f < frames; ++f) {
     before_frame(f);
@@ -213,7 +208,7 @@ Timing TimeFrames(viewer::Renderer& renderer, viewer::HeadlessContext& context, 
   }
   Timing t;
   t.wall_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count() / frames;
-  t.cpu_ms = 1000 * (CpuSeconds() - cpu_start) / frames;
+  t.cpu_ms = 1000 * (ProcessCpuSeconds() - cpu_start) / frames;
   t.shadow_renders = renderer.stats().shadow_map_renders - shadows_before;
   return t;
 }

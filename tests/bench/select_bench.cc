@@ -101,8 +101,7 @@ void Plot(const std::vector<Row>& rows, int cameras, const std::string& path) {
 }
 
 int Run(const Options& o) {
-  const auto dir = std::filesystem::temp_directory_path() / ("ave_select_bench_" + std::to_string(::getpid()));
-  auto site = select_site::Site::Start(dir, o.cameras);
+  auto site = select_site::Site::Start("ave_select_bench", o.cameras);
   if (!site.ok()) {
     std::cerr << "ave-bench select: " << site.status().message() << "\n";
     return 1;
@@ -193,7 +192,6 @@ int Run(const Options& o) {
   Plot(rows, o.cameras, o.plot);
   std::printf("plot: %s\n", o.plot.c_str());
   site->reset();
-  std::filesystem::remove_all(dir);
   return 0;
 }
 

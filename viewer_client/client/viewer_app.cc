@@ -8,8 +8,6 @@
 #include <set>
 #include <thread>
 
-#include <sys/resource.h>
-
 #include <grpcpp/grpcpp.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -17,6 +15,7 @@
 
 #include "ave/net/tls.h"
 #include "absl/strings/str_cat.h"
+#include "model_store/common/cpu_clock.h"
 #include "model_store/common/log.h"
 #include "model_store/geometry/bvh.h"
 #include "model_store/geometry/camera.h"
@@ -438,14 +437,6 @@ class Session {
   std::map<std::string, std::pair<uint64_t, std::chrono::steady_clock::time_point>> last_jpegs_;
   int frames_ = 0;
 };
-
-// CPU seconds of the whole process (every thread: llvmpipe's, the subscription's), for the
-// headless frame-time log line.
-double ProcessCpuSeconds() {
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
-  return double(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) + 1e-6 * double(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec);
-}
 
 // Writes the framebuffer to `path` as PNG.
 absl::Status SaveFramebuffer(GlContext& context, const std::string& path) {

@@ -1,4 +1,4 @@
-#include "model_store/environment/environment_truth.h"
+#include "tests/truth/environment_truth.h"
 
 #include <cmath>
 #include <numbers>

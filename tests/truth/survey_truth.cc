@@ -1,4 +1,4 @@
-#include "model_store/buildings/survey_truth.h"
+#include "tests/truth/survey_truth.h"
 
 #include <unistd.h>
 

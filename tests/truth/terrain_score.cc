@@ -1,4 +1,4 @@
-#include "model_store/pipeline/terrain_score.h"
+#include "tests/truth/terrain_score.h"
 
 #include <algorithm>
 #include <cmath>
