@@ -45,6 +45,11 @@ class SceneClock {
     auto before = std::prev(after);
     return t_ns - before->first < after->first - t_ns ? before->second : after->second;
   }
+  // The scene time of the newest frame captured so far (0 before the first).
+  double Latest() const {
+    std::lock_guard lock(mu_);
+    return frames_.empty() ? 0 : frames_.rbegin()->second;
+  }
 
  private:
   mutable std::mutex mu_;
@@ -112,7 +117,10 @@ TEST(ObjectsEndToEnd, DetectedWalkerArrivesAsAStablePlacedObjectWithAGrowingPath
   auto stub = v1::SceneService::NewStub(channel);
   grpc::ClientContext context;
   context.AddMetadata("authorization", std::string("Bearer ") + kViewer);
-  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(18));
+  // The test's budget is scene time (kGiveUpSceneS below): on a loaded machine the agent renders and
+  // detects slower than 10 frames a second, and a wall-clock budget failed there (issue 14). The
+  // deadline only guards against a hang.
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(240));
   v1::SubscribeRequest request;
   request.set_viewer_id("objects-e2e");
   request.set_max_rate_hz(10);
@@ -122,13 +130,14 @@ TEST(ObjectsEndToEnd, DetectedWalkerArrivesAsAStablePlacedObjectWithAGrowingPath
   // Every object sighting, by id: scene time, path length, nearest truth.
   std::map<uint64_t, std::vector<Sample>> seen;
   constexpr double kWantSpanS = 3.0;  // one id followed this long (scene time) is enough
+  constexpr double kGiveUpSceneS = 20;  // walkers are in view from the start; 3 s of following fits many times
   auto followed_long_enough = [&] {
     return std::any_of(seen.begin(), seen.end(), [&](const auto& s) {
       return s.second.size() >= 10 && s.second.back().scene_s - s.second.front().scene_s >= kWantSpanS;
     });
   };
   v1::SceneUpdate update;
-  while (!followed_long_enough() && reader->Read(&update)) {
+  while (!followed_long_enough() && scene_clock.Latest() < kGiveUpSceneS && reader->Read(&update)) {
     for (const v1::DynamicObject& o : update.objects()) {
       const std::optional<double> t = scene_clock.At(o.last_seen_ns());
       if (!t) continue;
