@@ -18,7 +18,10 @@ absl::StatusOr<std::string> ReclassifyLas(std::string_view source, const std::st
   if (!layout.ok()) return layout.status();
   const LasHeaderInfo& info = layout->info;
   const uint64_t records = info.point_count;
-  if (record_index.empty() ? classification.size() != records : record_index.size() != classification.size()) {
+  // No classes at all is a cloud with no point kept (the reader dropped every record): nothing to
+  // patch, whatever the index says (found by the fuzzer: every record out of range).
+  if (record_index.empty() ? !classification.empty() && classification.size() != records
+                           : record_index.size() != classification.size()) {
     return absl::InvalidArgumentError(name + ": " + std::to_string(classification.size()) + " classes for " +
                                       (record_index.empty() ? std::to_string(records) + " point records"
                                                             : std::to_string(record_index.size()) + " record indices"));

@@ -33,7 +33,7 @@ struct LasReclassifyStats {
 };
 
 // `classification[k]` goes to file record `record_index[k]` (empty: record k, and then there is
-// one class per record). Refused, naming `name` and the byte offset or point: a source the LAS
+// one class per record, or none at all when the reader kept no point). Refused, naming `name` and the byte offset or point: a source the LAS
 // reader refuses, a class count or record index that does not match the file, a class above 31
 // for formats 0-5.
 absl::StatusOr<std::string> ReclassifyLas(std::string_view source, const std::string& name,

@@ -149,6 +149,21 @@ TEST(LasRewrite, RecordsTheReaderDroppedKeepTheirClass) {
   }
 }
 
+// Found by the fuzzer: a file whose every record the reader drops gives an empty cloud; its
+// rewrite patches nothing rather than refusing "0 classes for N records".
+TEST(LasRewrite, AFileWithEveryRecordDroppedIsGivenBackUnchanged) {
+  const std::string in = MakeSyntheticLas({.points = 3, .rejected = 3});
+  absl::StatusOr<PointCloud> cloud = ParseLas(in, "in.las");
+  ASSERT_TRUE(cloud.ok()) << cloud.status();
+  ASSERT_EQ(cloud->size(), 0u);
+  EXPECT_EQ(cloud->rejected_non_finite, 3u);
+  LasReclassifyStats stats;
+  absl::StatusOr<std::string> out = ReclassifyLas(in, "in.las", {}, cloud->record_index, &stats);
+  ASSERT_TRUE(out.ok()) << out.status();
+  EXPECT_EQ(stats.patched, 0u);
+  EXPECT_EQ(out->substr(90), in.substr(90));
+}
+
 TEST(LasRewriteErrors, ClassAbove31InALegacyFormatNamesFileAndOffset) {
   SyntheticLasSpec spec;
   spec.version_minor = 2;

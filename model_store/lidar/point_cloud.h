@@ -24,7 +24,8 @@ struct PointCloud {
   std::string unit_name = "metre";
   uint64_t rejected_non_finite = 0;  // points dropped on reading for NaN/inf coordinates
   // The file record each point came from when the reader dropped some; empty when point k is
-  // record k. Lets a writer patch the right records of the source file (las_rewrite.h).
+  // record k (so also when no point was kept). Lets a writer patch the right records of the
+  // source file (las_rewrite.h).
   std::vector<uint64_t> record_index;
   // The file the points were read from, so a tool can rewrite that file keeping every byte it
   // does not change, and refuse when the file changed since it was read. Empty path: in memory.
