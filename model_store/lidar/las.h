@@ -67,7 +67,7 @@ std::optional<std::pair<double, std::string>> LinearUnitFromEpsg(int code);
 
 struct LasWriteOptions {
   uint8_t version_minor = 4;   // 2, 3 or 4
-  uint8_t point_format = 6;    // 0-3 or 6-8
+  uint8_t point_format = 6;    // 0-10 (wave packet and colour fields written as zeros)
   uint16_t extra_bytes = 0;    // appended to each record (zeros), to exercise record_length
   double scale = 0.001;        // file units per integer step
   double unit_to_metres = 1;   // the file's unit: coordinates are written divided by it

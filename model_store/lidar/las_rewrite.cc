@@ -13,8 +13,15 @@ namespace ave::model {
 
 absl::StatusOr<std::string> ReclassifyLas(std::string_view source, const std::string& name,
                                           const std::vector<uint8_t>& classification,
-                                          const std::vector<uint64_t>& record_index, LasReclassifyStats* stats_out) {
-  absl::StatusOr<LasLayout> layout = ParseLasLayout(source, name);
+                                          const std::vector<uint64_t>& record_index, LasReclassifyStats* stats) {
+  std::string out(source);
+  if (absl::Status s = ReclassifyLasInPlace(out, name, classification, record_index, stats); !s.ok()) return s;
+  return out;
+}
+
+absl::Status ReclassifyLasInPlace(std::string& out, const std::string& name, const std::vector<uint8_t>& classification,
+                                  const std::vector<uint64_t>& record_index, LasReclassifyStats* stats_out) {
+  absl::StatusOr<LasLayout> layout = ParseLasLayout(out, name);
   if (!layout.ok()) return layout.status();
   const LasHeaderInfo& info = layout->info;
   const uint64_t records = info.point_count;
@@ -30,10 +37,7 @@ absl::StatusOr<std::string> ReclassifyLas(std::string_view source, const std::st
   LasReclassifyStats stats;
   stats.records = records;
   stats.class_byte = extended ? 16 : 15;
-  std::string out(source);
-  std::memset(out.data() + kLasGeneratingSoftwareOffset, 0, 32);  // inside the 227+ header bytes checked
-  std::memcpy(out.data() + kLasGeneratingSoftwareOffset, kLasGeneratingSoftware, sizeof(kLasGeneratingSoftware) - 1);
-
+  // Check everything first, so a refused rewrite leaves `out` as it was.
   uint64_t previous = 0;
   for (size_t k = 0; k < classification.size(); ++k) {
     const uint64_t r = record_index.empty() ? k : record_index[k];
@@ -42,23 +46,28 @@ absl::StatusOr<std::string> ReclassifyLas(std::string_view source, const std::st
                                         " (the file holds " + std::to_string(records) + "; indices must increase)");
     }
     previous = r;
+    if (!extended && classification[k] > 31) {
+      return absl::InvalidArgumentError(name + ": byte offset " +
+                                        std::to_string(layout->point_offset + r * info.record_length + stats.class_byte) + ": point " +
+                                        std::to_string(k) + " (record " + std::to_string(r) + "): class " +
+                                        std::to_string(classification[k]) + " does not fit the 5 bits of point format " +
+                                        std::to_string(info.point_format) + " (0-31)");
+    }
+  }
+  std::memset(out.data() + kLasGeneratingSoftwareOffset, 0, 32);  // inside the 227+ header bytes checked
+  std::memcpy(out.data() + kLasGeneratingSoftwareOffset, kLasGeneratingSoftware, sizeof(kLasGeneratingSoftware) - 1);
+  for (size_t k = 0; k < classification.size(); ++k) {
+    const uint64_t r = record_index.empty() ? k : record_index[k];
     const size_t at = layout->point_offset + r * info.record_length + stats.class_byte;
     const uint8_t old_byte = static_cast<uint8_t>(out[at]);
-    uint8_t new_byte = classification[k];
-    if (!extended) {
-      if (classification[k] > 31) {
-        return absl::InvalidArgumentError(name + ": byte offset " + std::to_string(at) + ": point " + std::to_string(k) + " (record " +
-                                          std::to_string(r) + "): class " + std::to_string(classification[k]) +
-                                          " does not fit the 5 bits of point format " + std::to_string(info.point_format) + " (0-31)");
-      }
-      new_byte = static_cast<uint8_t>((old_byte & 0xE0) | classification[k]);
-    }
+    // Formats 0-5: the synthetic / key-point / withheld flags in bits 5-7 stay.
+    const uint8_t new_byte = extended ? classification[k] : static_cast<uint8_t>((old_byte & 0xE0) | classification[k]);
     stats.changed += new_byte != old_byte;
     out[at] = static_cast<char>(new_byte);
   }
   stats.patched = classification.size();
   if (stats_out) *stats_out = stats;
-  return out;
+  return absl::OkStatus();
 }
 
 absl::Status WriteReclassifiedLas(const PointCloud& cloud, const std::vector<uint8_t>& classification, const std::string& out_path,
@@ -79,12 +88,9 @@ absl::Status WriteReclassifiedLas(const PointCloud& cloud, const std::vector<uin
                                          (bytes->size() == src.size_bytes ? ", different content" : "") +
                                          "): not writing " + out_path + "; classify it again");
   }
-  absl::StatusOr<std::string> out = ReclassifyLas(*bytes, src.path, classification, cloud.record_index, stats);
-  if (!out.ok()) return out.status();
-  bytes->clear();
-  bytes->shrink_to_fit();
+  if (absl::Status s = ReclassifyLasInPlace(*bytes, src.path, classification, cloud.record_index, stats); !s.ok()) return s;
   const std::string tmp = out_path + ".ave-tmp-" + std::to_string(::getpid());
-  if (absl::Status s = WriteWholeFile(tmp, *out); !s.ok()) {
+  if (absl::Status s = WriteWholeFile(tmp, *bytes); !s.ok()) {
     std::error_code ignored;
     std::filesystem::remove(tmp, ignored);
     return s;

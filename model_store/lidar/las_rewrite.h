@@ -41,6 +41,11 @@ absl::StatusOr<std::string> ReclassifyLas(std::string_view source, const std::st
                                           const std::vector<uint64_t>& record_index = {},
                                           LasReclassifyStats* stats = nullptr);
 
+// The same, patching `bytes` where it lies (no second copy of a large survey in memory); on error
+// `bytes` is left as it was.
+absl::Status ReclassifyLasInPlace(std::string& bytes, const std::string& name, const std::vector<uint8_t>& classification,
+                                  const std::vector<uint64_t>& record_index = {}, LasReclassifyStats* stats = nullptr);
+
 // Re-reads `cloud.source.path` (the LAS file `cloud` was read from by ReadLas), refuses when it
 // changed since (size or fingerprint), and writes it to `out_path` reclassified (through a
 // temporary file renamed into place, so out_path may be the source itself).

@@ -177,6 +177,31 @@ TEST(LasRewriteErrors, ClassAbove31InALegacyFormatNamesFileAndOffset) {
   const size_t point_offset = *reinterpret_cast<const uint32_t*>(in.data() + 96);
   EXPECT_THAT(std::string(s.message()), HasSubstr("old.las: byte offset " + std::to_string(point_offset + 4 * 34 + 15)));
   EXPECT_THAT(std::string(s.message()), HasSubstr("class 40 does not fit the 5 bits of point format 3"));
+  std::string in_place = in;
+  EXPECT_FALSE(ReclassifyLasInPlace(in_place, "old.las", classes).ok());
+  EXPECT_TRUE(in_place == in);  // refused before any byte was patched
+}
+
+TEST(LasRewriteFiles, APlyInputBecomesANewLasFileInMetres) {
+  const std::string dir = ::testing::TempDir() + "/ave_las_rewrite_ply_" + std::to_string(::getpid());
+  std::filesystem::create_directories(dir);
+  const std::string ply = dir + "/scan.ply", las = dir + "/scan.las";
+  ASSERT_TRUE(WriteWholeFile(ply, "ply\nformat ascii 1.0\nelement vertex 3\nproperty double x\nproperty double y\n"
+                                  "property double z\nproperty uchar classification\nend_header\n"
+                                  "500000.5 4000000.25 10 1\n500001 4000001 11 1\n500002 4000002 12 1\n").ok());
+  absl::StatusOr<PointCloud> cloud = ReadPointCloud(ply);
+  ASSERT_TRUE(cloud.ok()) << cloud.status();
+  EXPECT_EQ(cloud->source.format, "ply");
+  absl::StatusOr<std::string> done = WriteClassifiedCloud(*cloud, {2, 6, 2}, las);
+  ASSERT_TRUE(done.ok()) << done.status();
+  EXPECT_THAT(*done, HasSubstr("new LAS 1.4 file (point format 6, metres) from the ply input"));
+  LasHeaderInfo info;
+  absl::StatusOr<PointCloud> back = ReadLas(las, {}, &info);
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_EQ(info.point_format, 6);
+  EXPECT_EQ(back->classification, (std::vector<uint8_t>{2, 6, 2}));
+  EXPECT_NEAR((back->origin + back->xyz[0].cast<double>() - Eigen::Vector3d(500000.5, 4000000.25, 10)).norm(), 0, 1e-3);
+  std::filesystem::remove_all(dir);
 }
 
 TEST(LasRewriteErrors, CountsAndIndicesThatDoNotMatchTheFile) {

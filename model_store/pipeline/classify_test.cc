@@ -68,6 +68,9 @@ TEST_P(Classify, OnlyTheClassificationChangesAndGroundIsFound) {
     (terrain[k] ? terrain_points : roof_points) += 1;
     (terrain[k] ? terrain_ground : roof_ground) += diff.classes_after[k] == 2;
   }
+  RecordProperty("classes_changed", std::to_string(changed));
+  RecordProperty("terrain_ground", std::to_string(terrain_ground) + "/" + std::to_string(terrain_points));
+  RecordProperty("roof_ground", std::to_string(roof_ground) + "/" + std::to_string(roof_points));
   EXPECT_GT(changed, diff.classes_after.size() / 2);
   EXPECT_GE(terrain_ground, 0.9 * terrain_points);
   EXPECT_LE(roof_ground, 0.1 * roof_points);
