@@ -1,6 +1,6 @@
 // ave-model: the static scene model from airborne LiDAR (issue 4; MISSION part A, AVE §4-§4.1).
 //   ave-model build --input survey.las [--resolution 0.5] [--db ave.db] [--mesh m.gltf] [--exr dtm.exr]
-//   ave-model classify --input survey.las --out classified.las
+//   ave-model classify --input survey.las --out classified.las   (only the classification changes)
 //   ave-model export --db ave.db --out model.glb|model.ply|model.obj|dtm.exr
 //   ave-model fit ...   (semi-automatic building fit, from the buildings library when built in)
 // Every parameter is in metres: the input's unit comes from its CRS (LAS WKT / GeoTIFF VLR) or
@@ -181,7 +181,9 @@ int RunBuild(const InputFlags& in, const std::string& db_path, const std::string
     if (absl::Status s = ave::model::WriteHeightExr(model->terrain.grid, exr_path); !s.ok()) return Fail(std::string(s.message()));
   }
   if (!classified_path.empty()) {
-    if (absl::Status s = ave::model::WriteLas(*cloud, model->point_class, classified_path); !s.ok()) return Fail(std::string(s.message()));
+    absl::StatusOr<std::string> written = ave::model::WriteClassifiedCloud(*cloud, model->point_class, classified_path);
+    if (!written.ok()) return Fail(std::string(written.status().message()));
+    std::cerr << "ave-model: " << *written << "\n";
   }
   const std::string parameters = "{\"resolution_m\":" + Fmt(options.resolution_m) + ",\"max_window_m\":" + Fmt(options.ground.max_window_m) +
                                  ",\"slope\":" + Fmt(options.ground.slope) + ",\"ground_threshold_m\":" + Fmt(options.ground.point_threshold_m) +
@@ -225,13 +227,20 @@ int RunBuild(const InputFlags& in, const std::string& db_path, const std::string
 
 int RunClassify(const InputFlags& in, const std::string& out) {
   const auto t0 = std::chrono::steady_clock::now();
-  absl::StatusOr<Built> built = ReadAndBuild(in, {});
-  if (!built.ok()) return Fail(std::string(built.status().message()));
-  const PointCloud* cloud = &built->cloud;
-  const ave::model::StaticModel* model = &built->model;
-  if (absl::Status s = ave::model::WriteLas(*cloud, model->point_class, out); !s.ok()) return Fail(std::string(s.message()));
-  std::cout << "{\"points\":" << cloud->size() << ",\"rejected\":" << cloud->rejected_non_finite
-            << ",\"classes\":" << ave::model::ClassCountsJson(model->point_class) << ",\"seconds\":" << Fmt(Seconds(t0)) << "}"
+  ave::model::CloudReadOptions read;
+  if (!in.units.empty()) {
+    read.unit_to_metres = ParseUnits(in.units);
+    if (!read.unit_to_metres) return Fail("--units '" + in.units + "': use m, ft, us-ft or metres per unit");
+  }
+  ave::model::StaticModelOptions options = in.options;
+  options.resolution_m = in.resolution_m;
+  absl::StatusOr<ave::model::ClassifiedFile> done = ave::model::ClassifyPointCloudFile(in.input, out, read, options);
+  if (!done.ok()) return Fail(std::string(done.status().message()));
+  const PointCloud& cloud = done->cloud;
+  std::cerr << "ave-model: " << in.input << ": " << cloud.size() << " points, unit " << cloud.unit_name << " (" << cloud.unit_to_metres
+            << " m)\nave-model: " << done->written << "\n";
+  std::cout << "{\"points\":" << cloud.size() << ",\"rejected\":" << cloud.rejected_non_finite
+            << ",\"classes\":" << ave::model::ClassCountsJson(done->model.point_class) << ",\"seconds\":" << Fmt(Seconds(t0)) << "}"
             << std::endl;
   return 0;
 }
@@ -273,11 +282,14 @@ int main(int argc, char** argv) {
   build->add_option("--name", name, "scene name (default: the input's file stem)");
   build->add_option("--mesh", meshes, "write the assembled mesh (.ply, .obj, .gltf, .glb); repeatable");
   build->add_option("--exr", exr, "write the height grid (DTM + DSM) as OpenEXR");
-  build->add_option("--classified", classified, "also write the classified points as LAS 1.4");
+  build->add_option("--classified", classified, "also write the classified points (.las: a LAS input keeps every byte but the classes)");
 
   CLI::App* classify = app.add_subcommand("classify", "write the points with computed LAS classes and print a JSON summary");
   classify_in.Add(classify);
-  classify->add_option("--out", classify_out, "output LAS file")->required();
+  classify->add_option("--out", classify_out,
+                       "output .las: a LAS input is given back with only its classification changed (version, format, scale, "
+                       "offset, unit, VLRs and every other byte kept); PLY/PCD become LAS 1.4 format 6 in metres")
+      ->required();
 
   CLI::App* exp = app.add_subcommand("export", "write the store's newest static model (mesh) or terrain (EXR)");
   exp->add_option("--db", export_db, "model store")->required();

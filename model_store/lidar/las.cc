@@ -24,20 +24,7 @@ constexpr size_t kVlrHeaderBytes = 54;
 
 size_t HeaderSizeFor(int minor) { return minor >= 4 ? 375 : minor == 3 ? 235 : 227; }
 
-// Bytes of the standard fields of each supported point data record format; 0 = unsupported.
-uint16_t BaseRecordLength(int format) {
-  switch (format) {
-    case 0: return 20;
-    case 1: return 28;
-    case 2: return 26;
-    case 3: return 34;
-    case 6: return 30;
-    case 7: return 36;
-    case 8: return 38;
-    default: return 0;
-  }
-}
-bool HasGpsTime(int format) { return format == 1 || format == 3 || format >= 6; }
+bool HasGpsTime(int format) { return format == 1 || format >= 3; }
 
 template <typename T>
 T Get(const char* p) {
@@ -72,7 +59,51 @@ struct Vlr {
   std::string_view payload;
 };
 
+// The VLR chain from the end of the header to the point data; `out` may be null.
+absl::StatusOr<size_t> WalkVlrs(std::string_view bytes, const std::string& name, size_t header_size, uint32_t vlr_count,
+                                uint32_t point_offset, std::vector<Vlr>* out) {
+  const char* p = bytes.data();
+  size_t at = header_size;
+  for (uint32_t i = 0; i < vlr_count; ++i) {
+    if (at + kVlrHeaderBytes > point_offset) {
+      return Bad(name, at, "VLR " + std::to_string(i) + " of " + std::to_string(vlr_count) + " runs past the point data offset " +
+                               std::to_string(point_offset));
+    }
+    const uint16_t length = Get<uint16_t>(p + at + 20);
+    if (at + kVlrHeaderBytes + length > point_offset) {
+      return Bad(name, at + 20, "VLR " + std::to_string(i) + " payload of " + std::to_string(length) +
+                                    " bytes runs past the point data offset " + std::to_string(point_offset));
+    }
+    if (out) {
+      Vlr vlr;
+      vlr.user_id.assign(p + at + 2, strnlen(p + at + 2, 16));
+      vlr.record_id = Get<uint16_t>(p + at + 18);
+      vlr.payload = bytes.substr(at + kVlrHeaderBytes, length);
+      out->push_back(vlr);
+    }
+    at += kVlrHeaderBytes + length;
+  }
+  return at;
+}
+
 }  // namespace
+
+uint16_t LasBaseRecordLength(int format) {
+  switch (format) {
+    case 0: return 20;
+    case 1: return 28;
+    case 2: return 26;
+    case 3: return 34;
+    case 4: return 57;  // format 1 + a 29-byte wave packet descriptor
+    case 5: return 63;
+    case 6: return 30;
+    case 7: return 36;
+    case 8: return 38;
+    case 9: return 59;
+    case 10: return 67;
+    default: return 0;
+  }
+}
 
 std::optional<std::pair<double, std::string>> LinearUnitFromEpsg(int code) {
   switch (code) {
@@ -109,15 +140,15 @@ std::optional<std::pair<double, std::string>> LinearUnitFromWkt(std::string_view
   return std::nullopt;
 }
 
-absl::StatusOr<PointCloud> ParseLas(std::string_view bytes, const std::string& name, const LasReadOptions& options,
-                                    LasHeaderInfo* info_out) {
+absl::StatusOr<LasLayout> ParseLasLayout(std::string_view bytes, const std::string& name) {
   const char* p = bytes.data();
   const size_t size = bytes.size();
   if (size < 4 || std::memcmp(p, "LASF", 4) != 0) return Bad(name, 0, "not a LAS file (no 'LASF' signature)");
   if (size < 227) {
     return Bad(name, size, "truncated header: the file ends after " + std::to_string(size) + " bytes, a LAS header needs 227");
   }
-  LasHeaderInfo info;
+  LasLayout layout;
+  LasHeaderInfo& info = layout.info;
   const int major = static_cast<uint8_t>(p[kOffVersionMajor]);
   const int minor = static_cast<uint8_t>(p[kOffVersionMajor + 1]);
   if (major != 1 || minor < 2 || minor > 4) {
@@ -142,11 +173,12 @@ absl::StatusOr<PointCloud> ParseLas(std::string_view bytes, const std::string& n
   // Bit 7 of the format byte marks LAZ compression (laszip convention).
   const uint8_t format_byte = static_cast<uint8_t>(p[kOffFormat]);
   if (format_byte & 0x80) return Bad(name, kOffFormat, "compressed (LAZ) point data is not supported");
+
   info.point_format = format_byte;
-  const uint16_t base_length = BaseRecordLength(format_byte);
+  const uint16_t base_length = LasBaseRecordLength(format_byte);
   if (base_length == 0) {
     return Bad(name, kOffFormat, "unknown or unsupported point data record format " + std::to_string(format_byte) +
-                                     " (supported: 0-3, 6-8)");
+                                     " (supported: 0-10)");
   }
   info.record_length = Get<uint16_t>(p + kOffRecordLength);
   if (info.record_length < base_length) {
@@ -196,27 +228,31 @@ absl::StatusOr<PointCloud> ParseLas(std::string_view bytes, const std::string& n
                    std::to_string(available / info.record_length) + " records of " + std::to_string(info.record_length) +
                    " bytes follow");
   }
+  const uint32_t vlr_count = Get<uint32_t>(p + kOffVlrCount);
+  absl::StatusOr<size_t> vlrs_end = WalkVlrs(bytes, name, header_size, vlr_count, point_offset, nullptr);
+  if (!vlrs_end.ok()) return vlrs_end.status();
+  layout.header_size = header_size;
+  layout.point_offset = point_offset;
+  layout.vlr_count = vlr_count;
+  layout.evlr_start = evlr_start;
+  layout.vlrs_end = *vlrs_end;
+  return layout;
+}
+
+absl::StatusOr<PointCloud> ParseLas(std::string_view bytes, const std::string& name, const LasReadOptions& options,
+                                    LasHeaderInfo* info_out) {
+  absl::StatusOr<LasLayout> layout = ParseLasLayout(bytes, name);
+  if (!layout.ok()) return layout.status();
+  const char* p = bytes.data();
+  LasHeaderInfo info = layout->info;
+  const uint64_t count = info.point_count;
+  const uint8_t format_byte = info.point_format;
+  const uint32_t point_offset = layout->point_offset;
 
   // VLRs between the header and the point data: the CRS and its unit.
   std::vector<Vlr> vlrs;
-  const uint32_t vlr_count = Get<uint32_t>(p + kOffVlrCount);
-  size_t at = header_size;
-  for (uint32_t i = 0; i < vlr_count; ++i) {
-    if (at + kVlrHeaderBytes > point_offset) {
-      return Bad(name, at, "VLR " + std::to_string(i) + " of " + std::to_string(vlr_count) + " runs past the point data offset " +
-                               std::to_string(point_offset));
-    }
-    Vlr vlr;
-    vlr.user_id.assign(p + at + 2, strnlen(p + at + 2, 16));
-    vlr.record_id = Get<uint16_t>(p + at + 18);
-    const uint16_t length = Get<uint16_t>(p + at + 20);
-    if (at + kVlrHeaderBytes + length > point_offset) {
-      return Bad(name, at + 20, "VLR " + std::to_string(i) + " payload of " + std::to_string(length) +
-                                    " bytes runs past the point data offset " + std::to_string(point_offset));
-    }
-    vlr.payload = bytes.substr(at + kVlrHeaderBytes, length);
-    vlrs.push_back(vlr);
-    at += kVlrHeaderBytes + length;
+  if (absl::StatusOr<size_t> end = WalkVlrs(bytes, name, layout->header_size, layout->vlr_count, point_offset, &vlrs); !end.ok()) {
+    return end.status();
   }
 
   PointCloud cloud;
@@ -297,9 +333,13 @@ absl::StatusOr<PointCloud> ParseLas(std::string_view bytes, const std::string& n
     Eigen::Vector3d local;
     for (int i = 0; i < 3; ++i) local[i] = (Get<int32_t>(record + 4 * i) * info.scale[i] + shift[i]) * unit[i];
     if (!local.allFinite() || local.cwiseAbs().maxCoeff() > 1e7) {
-      ++cloud.rejected_non_finite;
+      if (cloud.rejected_non_finite++ == 0) {  // from now on points and records differ: say which is which
+        cloud.record_index.resize(cloud.xyz.size());
+        for (size_t i = 0; i < cloud.record_index.size(); ++i) cloud.record_index[i] = i;
+      }
       continue;
     }
+    if (cloud.rejected_non_finite) cloud.record_index.push_back(k);
     cloud.xyz.push_back(local.cast<float>());
     cloud.intensity.push_back(Get<uint16_t>(record + 12));
     const uint8_t returns = static_cast<uint8_t>(record[14]);
@@ -317,6 +357,9 @@ absl::StatusOr<PointCloud> ParseLas(std::string_view bytes, const std::string& n
       if (HasGpsTime(f)) cloud.gps_time.push_back(Get<double>(record + 20));
     }
   }
+  cloud.source.format = "las";
+  cloud.source.size_bytes = bytes.size();
+  cloud.source.fingerprint = Fingerprint64(bytes);
   if (info_out) *info_out = info;
   return cloud;
 }
@@ -324,16 +367,19 @@ absl::StatusOr<PointCloud> ParseLas(std::string_view bytes, const std::string& n
 absl::StatusOr<PointCloud> ReadLas(const std::string& path, const LasReadOptions& options, LasHeaderInfo* info) {
   absl::StatusOr<std::string> bytes = ReadWholeFile(path);
   if (!bytes.ok()) return bytes.status();
-  return ParseLas(*bytes, path, options, info);
+  absl::StatusOr<PointCloud> cloud = ParseLas(*bytes, path, options, info);
+  if (cloud.ok()) cloud->source.path = path;
+  return cloud;
 }
 
 absl::StatusOr<std::string> EncodeLas(const PointCloud& cloud, const std::vector<uint8_t>& classification,
                                       const LasWriteOptions& options) {
   const int f = options.point_format;
-  const uint16_t base = BaseRecordLength(f);
+  const uint16_t base = LasBaseRecordLength(f);
   if (base == 0) return absl::InvalidArgumentError("LAS writer: point format " + std::to_string(f) + " is not supported");
   if (options.version_minor < 2 || options.version_minor > 4) return absl::InvalidArgumentError("LAS writer: version 1.2-1.4 only");
-  if (f >= 6 && options.version_minor < 4) return absl::InvalidArgumentError("LAS writer: formats 6-8 need LAS 1.4");
+  if (f >= 6 && options.version_minor < 4) return absl::InvalidArgumentError("LAS writer: formats 6-10 need LAS 1.4");
+  if (f >= 4 && options.version_minor < 3) return absl::InvalidArgumentError("LAS writer: formats 4 and 5 need LAS 1.3");
   if (!(options.scale > 0) || !(options.unit_to_metres > 0)) return absl::InvalidArgumentError("LAS writer: scale and unit must be > 0");
   const size_t n = cloud.size();
   if (!classification.empty() && classification.size() != n) {
@@ -413,7 +459,7 @@ absl::StatusOr<std::string> EncodeLas(const PointCloud& cloud, const std::vector
       Put<int16_t>(records, 0);    // scan angle
       Put<uint16_t>(records, source);
       Put<double>(records, gps);
-      records.append(base - 30, '\0');  // RGB (7), RGB + NIR (8)
+      records.append(base - 30, '\0');  // RGB (7), RGB + NIR (8), wave packet (9, 10)
     } else {
       Put<uint8_t>(records, static_cast<uint8_t>((ret & 0x07) | ((nret & 0x07) << 3)));
       Put<uint8_t>(records, static_cast<uint8_t>(std::min<uint8_t>(cls, 31)));
@@ -421,7 +467,7 @@ absl::StatusOr<std::string> EncodeLas(const PointCloud& cloud, const std::vector
       Put<uint8_t>(records, 0);  // user data
       Put<uint16_t>(records, source);
       if (HasGpsTime(f)) Put<double>(records, gps);
-      records.append(base - (HasGpsTime(f) ? 28 : 20), '\0');  // RGB (2, 3)
+      records.append(base - (HasGpsTime(f) ? 28 : 20), '\0');  // RGB (2, 3), wave packet (4, 5)
     }
     records.append(options.extra_bytes, '\0');
   }

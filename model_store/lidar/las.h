@@ -1,6 +1,6 @@
 #pragma once
 // ASPRS LAS 1.2-1.4 reader and writer (MISSION part A, AVE §4.1 input): uncompressed point data
-// record formats 0-3 and 6-8, scale/offset honoured, positions returned under a double-precision
+// record formats 0-10 (4, 5, 9 and 10 carry wave packet descriptors, read past), scale/offset honoured, positions returned under a double-precision
 // local origin so survey coordinates near 1e6-1e7 m keep millimetres.
 //
 // Linear unit: the file's CRS decides (OGC WKT VLR `UNIT[...]` / `LENGTHUNIT[...]`, or the GeoTIFF
@@ -38,6 +38,21 @@ struct LasHeaderInfo {
   std::string unit_source;  // "wkt", "geotiff", "override" or "default"
 };
 
+// Where things are in a LAS file, after every header check ParseLas makes (the rewriter in
+// las_rewrite.h patches records in place from it).
+struct LasLayout {
+  LasHeaderInfo info;
+  uint16_t header_size = 0;
+  uint32_t point_offset = 0;    // first point record
+  uint32_t vlr_count = 0;
+  uint64_t evlr_start = 0;      // 0: none (or LAS < 1.4)
+  size_t vlrs_end = 0;          // first byte after the last VLR (<= point_offset)
+};
+// Checks the header and VLR chain of a whole LAS file held in memory; errors as ParseLas.
+absl::StatusOr<LasLayout> ParseLasLayout(std::string_view bytes, const std::string& name);
+// Bytes of the standard fields of a point data record format (0-10); 0 = unknown.
+uint16_t LasBaseRecordLength(int format);
+
 // Parses a whole LAS file held in memory; `name` is used in error messages.
 absl::StatusOr<PointCloud> ParseLas(std::string_view bytes, const std::string& name, const LasReadOptions& options = {},
                                     LasHeaderInfo* info = nullptr);
@@ -52,7 +67,7 @@ std::optional<std::pair<double, std::string>> LinearUnitFromEpsg(int code);
 
 struct LasWriteOptions {
   uint8_t version_minor = 4;   // 2, 3 or 4
-  uint8_t point_format = 6;    // 0-3 or 6-8
+  uint8_t point_format = 6;    // 0-10 (wave packet and colour fields written as zeros)
   uint16_t extra_bytes = 0;    // appended to each record (zeros), to exercise record_length
   double scale = 0.001;        // file units per integer step
   double unit_to_metres = 1;   // the file's unit: coordinates are written divided by it
@@ -60,7 +75,9 @@ struct LasWriteOptions {
   std::optional<int> geotiff_linear_unit;  // EPSG unit code: a GeoKeyDirectory VLR (34735)
 };
 
-// Writes `cloud` (world = origin + xyz, metres) as uncompressed LAS. `classification` overrides
+// Writes `cloud` (world = origin + xyz, metres) as a NEW uncompressed LAS file: for clouds that
+// did not come from a LAS file (PLY, PCD, synthetic). A LAS input is rewritten with
+// ReclassifyLas (las_rewrite.h), which keeps every byte but the classification. `classification` overrides
 // the cloud's own classes when non-empty (one per point). Attributes the cloud lacks are zero.
 absl::Status WriteLas(const PointCloud& cloud, const std::vector<uint8_t>& classification, const std::string& path,
                       const LasWriteOptions& options = {});

@@ -163,9 +163,9 @@ TEST(LasErrors, RecordLengthAndFormat) {
   const uint16_t len = 20;
   std::memcpy(short_record.data() + 105, &len, 2);
   EXPECT_THAT(std::string(ParseLas(short_record, "r.las").status().message()), HasSubstr("r.las: byte offset 105"));
-  unknown[104] = 5;
+  unknown[104] = 11;
   EXPECT_THAT(std::string(ParseLas(unknown, "f.las").status().message()),
-              HasSubstr("f.las: byte offset 104: unknown or unsupported point data record format 5"));
+              HasSubstr("f.las: byte offset 104: unknown or unsupported point data record format 11"));
   laz[104] = static_cast<char>(0x86);
   EXPECT_THAT(std::string(ParseLas(laz, "z.las").status().message()), HasSubstr("LAZ"));
 }

@@ -23,6 +23,18 @@ struct PointCloud {
   double unit_to_metres = 1.0;
   std::string unit_name = "metre";
   uint64_t rejected_non_finite = 0;  // points dropped on reading for NaN/inf coordinates
+  // The file record each point came from when the reader dropped some; empty when point k is
+  // record k (so also when no point was kept). Lets a writer patch the right records of the
+  // source file (las_rewrite.h).
+  std::vector<uint64_t> record_index;
+  // The file the points were read from, so a tool can rewrite that file keeping every byte it
+  // does not change, and refuse when the file changed since it was read. Empty path: in memory.
+  struct Source {
+    std::string path;
+    std::string format;        // "las", "ply", "pcd"
+    uint64_t size_bytes = 0;
+    uint64_t fingerprint = 0;  // Fingerprint64 (read_file.h) of the whole file as read
+  } source;
 
   size_t size() const { return xyz.size(); }
 };

@@ -8,6 +8,7 @@
 #include <sstream>
 #include <vector>
 
+#include "model_store/lidar/las_rewrite.h"
 #include "model_store/lidar/read_file.h"
 
 namespace ave::model {
@@ -161,14 +162,39 @@ absl::StatusOr<PointCloud> ParsePly(std::string_view bytes, const std::string& n
 absl::StatusOr<PointCloud> ReadPointCloud(const std::string& path, const CloudReadOptions& options) {
   const std::string ext = LowerExtension(path);
   if (ext == "las") return ReadLas(path, LasReadOptions{options.unit_to_metres});
-  if (ext == "pcd") return ReadPcd(path, options);
+  if (ext == "pcd") {
+    absl::StatusOr<PointCloud> cloud = ReadPcd(path, options);
+    if (cloud.ok()) {
+      cloud->source.path = path;
+      cloud->source.format = "pcd";
+    }
+    return cloud;
+  }
   if (ext == "ply") {
     absl::StatusOr<std::string> bytes = ReadWholeFile(path);
     if (!bytes.ok()) return bytes.status();
-    return ParsePly(*bytes, path, options);
+    absl::StatusOr<PointCloud> cloud = ParsePly(*bytes, path, options);
+    if (cloud.ok()) cloud->source = {path, "ply", bytes->size(), Fingerprint64(*bytes)};
+    return cloud;
   }
   if (ext == "laz") return absl::InvalidArgumentError(path + ": compressed LAZ is not supported; decompress to LAS first");
   return absl::InvalidArgumentError(path + ": unknown point cloud extension '." + ext + "' (las, ply, pcd)");
+}
+
+absl::StatusOr<std::string> WriteClassifiedCloud(const PointCloud& cloud, const std::vector<uint8_t>& classification,
+                                                 const std::string& out_path) {
+  if (LowerExtension(out_path) != "las") {
+    return absl::InvalidArgumentError(out_path + ": classified points are written as LAS; name the output *.las");
+  }
+  if (cloud.source.format == "las") {
+    LasReclassifyStats stats;
+    if (absl::Status s = WriteReclassifiedLas(cloud, classification, out_path, &stats); !s.ok()) return s;
+    return cloud.source.path + " rewritten to " + out_path + ": " + std::to_string(stats.changed) + " of " +
+           std::to_string(stats.records) + " point classes changed, every other byte kept";
+  }
+  if (absl::Status s = WriteLas(cloud, classification, out_path); !s.ok()) return s;
+  return out_path + ": new LAS 1.4 file (point format 6, metres) from the " +
+         (cloud.source.format.empty() ? std::string("in-memory") : cloud.source.format) + " input";
 }
 
 }  // namespace ave::model

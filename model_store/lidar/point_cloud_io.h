@@ -6,6 +6,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "absl/status/statusor.h"
 
@@ -20,6 +21,15 @@ struct CloudReadOptions {
 
 // By extension (case-insensitive): .las, .ply, .pcd. The unit used is in cloud.unit_name.
 absl::StatusOr<PointCloud> ReadPointCloud(const std::string& path, const CloudReadOptions& options = {});
+
+// Writes the classes computed for `cloud` (one per point) to `out_path`, which must end in .las.
+// A cloud read from a LAS file: that file, re-read and rewritten with only its classification
+// changed (las_rewrite.h: same version, format, scale, offset, unit, VLRs/EVLRs and every other
+// record byte; refused if the file changed since it was read). A cloud from PLY or PCD: a new
+// LAS 1.4 file, point format 6, metres, scale 1 mm, no CRS VLR (those inputs carry none we
+// read), positions and the attributes the reader kept. Returns one line saying which was done.
+absl::StatusOr<std::string> WriteClassifiedCloud(const PointCloud& cloud, const std::vector<uint8_t>& classification,
+                                                 const std::string& out_path);
 
 absl::StatusOr<PointCloud> ParsePly(std::string_view bytes, const std::string& name, const CloudReadOptions& options = {});
 // PCD through PCL; Unimplemented when this build has no PCL.

@@ -34,4 +34,21 @@ std::string LowerExtension(const std::string& path) {
   return ext;
 }
 
+uint64_t Fingerprint64(std::string_view bytes) {
+  // 8 bytes at a time: xor, multiply by the golden-ratio constant, fold the high half down.
+  constexpr uint64_t kMul = 0x9E3779B97F4A7C15ull;
+  uint64_t h = 0xCBF29CE484222325ull ^ (bytes.size() * kMul);
+  size_t at = 0;
+  for (; at + 8 <= bytes.size(); at += 8) {
+    uint64_t w;
+    std::memcpy(&w, bytes.data() + at, 8);
+    h = (h ^ w) * kMul;
+    h ^= h >> 29;
+  }
+  uint64_t tail = 0;
+  if (at < bytes.size()) std::memcpy(&tail, bytes.data() + at, bytes.size() - at);
+  h = (h ^ tail) * kMul;
+  return h ^ (h >> 32);
+}
+
 }  // namespace ave::model

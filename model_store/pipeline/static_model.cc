@@ -4,6 +4,8 @@
 #include <chrono>
 #include <cmath>
 
+#include "model_store/lidar/read_file.h"
+
 namespace ave::model {
 namespace {
 
@@ -66,6 +68,26 @@ absl::StatusOr<StaticModel> BuildStaticModel(const PointCloud& cloud, const Stat
   model.mesh_seconds = SecondsSince(t0);
   report(1.0, "done");
   return model;
+}
+
+absl::StatusOr<ClassifiedFile> ClassifyPointCloudFile(const std::string& input, const std::string& out_path,
+                                                      const CloudReadOptions& read, const StaticModelOptions& options,
+                                                      const std::function<void(double, const std::string&)>& progress) {
+  if (std::string why = options.Check(); !why.empty()) return absl::InvalidArgumentError("bad option: " + why);
+  if (LowerExtension(out_path) != "las") {  // before the work, not after
+    return absl::InvalidArgumentError(out_path + ": classified points are written as LAS; name the output *.las");
+  }
+  ClassifiedFile result;
+  absl::StatusOr<PointCloud> cloud = ReadPointCloud(input, read);
+  if (!cloud.ok()) return cloud.status();
+  result.cloud = std::move(*cloud);
+  absl::StatusOr<StaticModel> model = BuildStaticModel(result.cloud, options, progress);
+  if (!model.ok()) return absl::Status(model.status().code(), input + ": " + std::string(model.status().message()));
+  result.model = std::move(*model);
+  absl::StatusOr<std::string> written = WriteClassifiedCloud(result.cloud, result.model.point_class, out_path);
+  if (!written.ok()) return written.status();
+  result.written = std::move(*written);
+  return result;
 }
 
 std::string ClassCountsJson(const std::vector<uint8_t>& point_class) {

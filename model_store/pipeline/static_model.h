@@ -13,6 +13,7 @@
 #include "model_store/buildings/buildings.h"
 #include "model_store/geometry/mesh.h"
 #include "model_store/lidar/point_cloud.h"
+#include "model_store/lidar/point_cloud_io.h"
 #include "model_store/terrain/mesh_export.h"
 #include "model_store/terrain/terrain.h"
 
@@ -44,6 +45,18 @@ struct StaticModel {
 // `progress(fraction, stage)` is called between stages when set.
 absl::StatusOr<StaticModel> BuildStaticModel(const PointCloud& cloud, const StaticModelOptions& options,
                                              const std::function<void(double, const std::string&)>& progress = {});
+
+// `ave-model classify` (issue 14): reads `input` (.las, .ply, .pcd), builds the static model and
+// writes its per-point classes to `out_path` with WriteClassifiedCloud, so a LAS input comes back
+// with only its classification changed. Errors name the input or the output.
+struct ClassifiedFile {
+  PointCloud cloud;
+  StaticModel model;
+  std::string written;  // one line: how the output was written
+};
+absl::StatusOr<ClassifiedFile> ClassifyPointCloudFile(const std::string& input, const std::string& out_path,
+                                                      const CloudReadOptions& read, const StaticModelOptions& options,
+                                                      const std::function<void(double, const std::string&)>& progress = {});
 
 // Counts per LAS class as one JSON object, e.g. {"1":10,"2":900,"6":90}.
 std::string ClassCountsJson(const std::vector<uint8_t>& point_class);

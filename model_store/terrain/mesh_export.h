@@ -29,7 +29,12 @@ struct TessellateOptions {
 TriangleMesh TessellateDtm(const HeightGrid& grid, const TessellateOptions& options = {});
 
 // Mesh files, chosen by extension: .ply (binary little-endian), .obj, .gltf (glTF 2.0, buffer
-// embedded as a base64 data URI), .glb (binary glTF 2.0).
+// embedded as a base64 data URI), .glb (binary glTF 2.0). These are derived products, never a
+// rewrite of the user's point cloud (that is las_rewrite.h), so they have their own fixed layout:
+// metres whatever the survey's unit (the reader applied it), positions as float relative to the
+// origin, which is written at full precision in a "comment origin X Y Z" line (PLY), a comment
+// (OBJ) or asset.extras.origin (glTF); no CRS. PLY: vertex float x y z, then float nx ny nz and
+// uchar red green blue when the mesh has them, then face lists (uchar count, uint indices).
 absl::Status WriteMesh(const TriangleMesh& mesh, const std::string& path);
 absl::StatusOr<std::string> EncodeGltf(const TriangleMesh& mesh, bool binary);
 
