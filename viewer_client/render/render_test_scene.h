@@ -2,6 +2,7 @@
 // Shared by the render tests (renderer_test.cc, renderer_truth_test.cc, renderer_cases_test.cc,
 // view_cache_test.cc): a flat ground square, one box building and one projector looking down at
 // it obliquely, rendered headless (EGL, Mesa llvmpipe; no EGL is a failure), and picture helpers.
+#include <algorithm>
 #include <chrono>
 #include <functional>
 #include <cstdio>
@@ -43,20 +44,22 @@ inline Eigen::Vector3i QuadrantColor(double u, double v, int width, int height) 
   return left ? Eigen::Vector3i(0, 0, 255) : Eigen::Vector3i(255, 255, 0);
 }
 
-inline std::vector<uint8_t> QuadrantImage(int width, int height) {
+// An opaque RGBA image whose pixel (u, v) (column, row from the top) has color(u, v, width, height).
+inline std::vector<uint8_t> ImageOf(int width, int height,
+                                    const std::function<Eigen::Vector3i(double, double, int, int)>& color) {
   std::vector<uint8_t> rgba(static_cast<size_t>(width) * height * 4);
   for (int v = 0; v < height; ++v) {
     for (int u = 0; u < width; ++u) {
-      const Eigen::Vector3i c = QuadrantColor(u, v, width, height);
+      const Eigen::Vector3i c = color(u, v, width, height);
       uint8_t* px = &rgba[(static_cast<size_t>(v) * width + u) * 4];
-      px[0] = static_cast<uint8_t>(c.x());
-      px[1] = static_cast<uint8_t>(c.y());
-      px[2] = static_cast<uint8_t>(c.z());
+      for (int ch = 0; ch < 3; ++ch) px[ch] = static_cast<uint8_t>(std::clamp(c[ch], 0, 255));
       px[3] = 255;
     }
   }
   return rgba;
 }
+
+inline std::vector<uint8_t> QuadrantImage(int width, int height) { return ImageOf(width, height, QuadrantColor); }
 
 inline TriangleMesh GroundAndBox() {
   TriangleMesh mesh;
@@ -227,18 +230,7 @@ inline Eigen::Vector3i GradientColor(double u, double v, int width, int height) 
   return Eigen::Vector3d(255.0 * (u + 0.5) / width, 255.0 * (v + 0.5) / height, 64).array().round().cast<int>();
 }
 
-inline std::vector<uint8_t> GradientImage(int width, int height) {
-  std::vector<uint8_t> rgba(static_cast<size_t>(width) * height * 4);
-  for (int v = 0; v < height; ++v) {
-    for (int u = 0; u < width; ++u) {
-      const Eigen::Vector3i c = GradientColor(u, v, width, height);
-      uint8_t* px = &rgba[(static_cast<size_t>(v) * width + u) * 4];
-      for (int ch = 0; ch < 3; ++ch) px[ch] = static_cast<uint8_t>(std::clamp(c[ch], 0, 255));
-      px[3] = 255;
-    }
-  }
-  return rgba;
-}
+inline std::vector<uint8_t> GradientImage(int width, int height) { return ImageOf(width, height, GradientColor); }
 
 // Per-channel absolute differences of two RGBA pictures.
 struct PictureDifference {

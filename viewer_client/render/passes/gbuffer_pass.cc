@@ -8,13 +8,12 @@ absl::Status GbufferTargets::Resize(int width, int height, const char* what) {
   color = MakeTexture2D(GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE, width, height);
   normal = MakeTexture2D(GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE, width, height);
   depth = MakeTexture2D(GL_DEPTH_COMPONENT32F, GL_DEPTH_COMPONENT, GL_FLOAT, width, height);
-  glBindFramebuffer(GL_FRAMEBUFFER, fbo);
-  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, color, 0);
-  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT1, GL_TEXTURE_2D, normal, 0);
-  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_TEXTURE_2D, depth, 0);
+  const absl::Status complete =
+      AttachTextures(fbo, {{GL_COLOR_ATTACHMENT0, color}, {GL_COLOR_ATTACHMENT1, normal}, {GL_DEPTH_ATTACHMENT, depth}},
+                     what);
   const GLenum gbuffers[] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1};
   glDrawBuffers(2, gbuffers);
-  return CheckFramebuffer(GL_FRAMEBUFFER, what);
+  return complete;
 }
 
 absl::StatusOr<std::unique_ptr<GbufferPass>> GbufferPass::Create(const RendererOptions& options) {

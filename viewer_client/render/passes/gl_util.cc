@@ -136,6 +136,15 @@ absl::Status CheckFramebuffer(GLenum target, const char* what) {
   return absl::InternalError(std::string(what) + ": framebuffer incomplete (status " + std::to_string(status) + ")");
 }
 
+absl::Status AttachTextures(GLuint fbo, std::initializer_list<std::pair<GLenum, GLuint>> attachments,
+                            const char* what) {
+  glBindFramebuffer(GL_FRAMEBUFFER, fbo);
+  for (const auto& [attachment, texture] : attachments) {
+    glFramebufferTexture2D(GL_FRAMEBUFFER, attachment, GL_TEXTURE_2D, texture, 0);
+  }
+  return CheckFramebuffer(GL_FRAMEBUFFER, what);
+}
+
 Texture MakeTexture2D(GLenum internal_format, GLenum format, GLenum type, int width, int height) {
   Texture texture = Texture::Create();
   glBindTexture(GL_TEXTURE_2D, texture);

@@ -142,6 +142,11 @@ void ResetPassState();
 absl::Status CheckGl(const char* where);
 absl::Status CheckFramebuffer(GLenum target, const char* what);
 
+// Attaches 2D textures (attachment, texture) to `fbo`, leaves it bound and checks it is complete;
+// `what` names the target in the error.
+absl::Status AttachTextures(GLuint fbo, std::initializer_list<std::pair<GLenum, GLuint>> attachments,
+                            const char* what);
+
 // A width x height 2D texture, nearest, clamped.
 Texture MakeTexture2D(GLenum internal_format, GLenum format, GLenum type, int width, int height);
 void BindTexture(GLint unit, GLenum target, GLuint texture);

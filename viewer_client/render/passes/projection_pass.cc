@@ -85,25 +85,26 @@ absl::Status ProjectionPass::Resize(int width, int height) {
   live_ = MakeTexture2D(GL_RGBA32F, GL_RGBA, GL_FLOAT, width, height);
   retained_ = MakeTexture2D(GL_RGBA32F, GL_RGBA, GL_FLOAT, width, height);
   fade_ = MakeTexture2D(GL_R32F, GL_RED, GL_FLOAT, width, height);
-  glBindFramebuffer(GL_FRAMEBUFFER, fbo_);
-  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, live_, 0);
-  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT1, GL_TEXTURE_2D, retained_, 0);
-  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT2, GL_TEXTURE_2D, fade_, 0);
-  return CheckFramebuffer(GL_FRAMEBUFFER, "projector accumulation");
+  return AttachTextures(
+      fbo_, {{GL_COLOR_ATTACHMENT0, live_}, {GL_COLOR_ATTACHMENT1, retained_}, {GL_COLOR_ATTACHMENT2, fade_}},
+      "projector accumulation");
 }
 
-void ProjectionPass::BindInputs(const View& view, const Program& program, const GbufferTargets& gbuffer) const {
+void ProjectionPass::UseProgram(const View& view, const Program& program) const {
   glUseProgram(program.id);
   const Uniforms& u = program.u;
   glUniform1i(u["u_gbuffer_normal"], kGbufferNormalUnit);
   glUniform1i(u["u_gbuffer_depth"], kGbufferDepthUnit);
   glUniform1i(u["u_video"], kVideoUnit);
   glUniform1i(u["u_shadow"], kShadowUnit);
-  glUniformMatrix4fv(u["u_view_clip_from_local"], 1, GL_FALSE, ToGlArray(view.projection * view.view).data());
   glUniformMatrix4fv(u["u_local_from_window"], 1, GL_FALSE, ToGlArray(LocalFromWindow(view)).data());
-  const DisplayOptions& display = options_.display;
-  glUniform1f(u["u_feather"], static_cast<float>(display.seam_feather));
-  glUniform1i(u["u_best_view"], display.overlap == OverlapPolicy::kBestView ? 1 : 0);
+  glUniform1f(u["u_feather"], static_cast<float>(options_.display.seam_feather));
+  glUniform1i(u["u_best_view"], options_.display.overlap == OverlapPolicy::kBestView ? 1 : 0);
+}
+
+void ProjectionPass::BindInputs(const View& view, const Program& program, const GbufferTargets& gbuffer) const {
+  UseProgram(view, program);
+  glUniformMatrix4fv(program.u["u_view_clip_from_local"], 1, GL_FALSE, ToGlArray(view.projection * view.view).data());
   BindTexture(kGbufferNormalUnit, GL_TEXTURE_2D, gbuffer.normal);
   BindTexture(kGbufferDepthUnit, GL_TEXTURE_2D, gbuffer.depth);
 }
@@ -208,15 +209,8 @@ void ProjectionPass::DrawCombinedLive(const FrameContext& frame, const View& vie
   }
   if (reach.empty()) return;
   ApplyState(State::kCombined, /*blend=*/!last_wins);
-  glUseProgram(combined_.id);
+  UseProgram(view, combined_);
   const Uniforms& u = combined_.u;
-  glUniform1i(u["u_gbuffer_normal"], kGbufferNormalUnit);
-  glUniform1i(u["u_gbuffer_depth"], kGbufferDepthUnit);
-  glUniform1i(u["u_video"], kVideoUnit);
-  glUniform1i(u["u_shadow"], kShadowUnit);
-  glUniformMatrix4fv(u["u_local_from_window"], 1, GL_FALSE, ToGlArray(LocalFromWindow(view)).data());
-  glUniform1f(u["u_feather"], static_cast<float>(options_.display.seam_feather));
-  glUniform1i(u["u_best_view"], options_.display.overlap == OverlapPolicy::kBestView ? 1 : 0);
   glUniform1i(u["u_last_wins"], last_wins ? 1 : 0);
   glUniform1f(u["u_weight_scale"], 1.0f);
   glBindVertexArray(empty_vao_);

@@ -52,7 +52,9 @@ class ProjectionPass {
       : options_(options), video_(video), shadows_(shadows), volumes_(/*with_normals=*/false, /*indexed=*/false) {}
   enum class State { kVolumes, kCombined };
   static void ApplyState(State state, bool blend);
-  // `program` reads the G-buffer's normal and depth.
+  // `program` bound with the uniforms every projector program takes (units, view, overlap policy).
+  void UseProgram(const View& view, const Program& program) const;
+  // UseProgram, and `program` reads the G-buffer's normal and depth.
   void BindInputs(const View& view, const Program& program, const GbufferTargets& gbuffer) const;
   void DrawCombinedLive(const FrameContext& frame, const View& view, const ViewFrame& seen, bool last_wins);
   // One pass over its frustum volume (vertices 36 * index ...) with `u`'s program bound.

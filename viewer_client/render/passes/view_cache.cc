@@ -24,10 +24,11 @@ absl::Status ViewCachePass::Resize(int width, int height) {
   glTexStorage3D(GL_TEXTURE_2D_ARRAY, 1, GL_RGBA32F, width, height, options_.view_cache_entries);
   glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
   glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
-  glBindFramebuffer(GL_FRAMEBUFFER, accum_fbo_);
-  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT1, GL_TEXTURE_2D, retained_, 0);
-  glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT2, GL_TEXTURE_2D, fade_, 0);
-  if (absl::Status s = CheckFramebuffer(GL_FRAMEBUFFER, "view cache retained"); !s.ok()) return s;
+  if (absl::Status s = AttachTextures(accum_fbo_, {{GL_COLOR_ATTACHMENT1, retained_}, {GL_COLOR_ATTACHMENT2, fade_}},
+                                      "view cache retained");
+      !s.ok()) {
+    return s;
+  }
   glBindFramebuffer(GL_FRAMEBUFFER, mapping_fbo_);
   std::array<GLenum, kMaxViewCacheEntries> entries{};
   for (int k = 0; k < options_.view_cache_entries; ++k) {
