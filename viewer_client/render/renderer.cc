@@ -4,6 +4,13 @@
 // object per pass (passes/*.h), and Impl::Render draws a frame top to bottom by calling them in
 // order. Each pass owns its GL objects and sets its own GL state; what passes share is in the
 // FrameContext (the whole Render call) and ViewFrame (one view) of passes/frame.h.
+//
+// A new layer (avatars, a point cloud, replay) is a new pass: a class in passes/ with a static
+// Create (programs, StatusOr), GL objects held by gl_util.h handles, an ApplyState that starts from
+// ResetPassState(), and a Draw taking (const FrameContext&, const View&, const ViewFrame&). It is
+// a member of Impl, created in Renderer::Create, fed by a Renderer::Set... method, and called at
+// its place in Impl::Render (or, for what lands in the G-buffer, from DrawViewExact and the model
+// rectangles of DrawViewCached, beside GbufferPass::Draw).
 #include <algorithm>
 #include <cmath>
 #include <memory>
