@@ -365,23 +365,24 @@ absl::StatusOr<std::unique_ptr<Renderer>> Renderer::Create(const RendererOptions
   const bool cache_supported = major * 10 + minor >= 43;
   auto impl = std::make_unique<Impl>(options, cache_supported);
   const RendererOptions& o = impl->options;  // the renderer's copy: passes keep a reference
+  // Each pass compiles its programs; the first that fails names its shader file.
   auto assign = [](auto& pass, auto created) -> absl::Status {
     if (!created.ok()) return created.status();
     pass = *std::move(created);
     return absl::OkStatus();
   };
-  for (absl::Status s : {assign(impl->gbuffer, GbufferPass::Create(o)), assign(impl->shadows, ShadowMaps::Create(o)),
-                         assign(impl->lines, LinePass::Create()), assign(impl->shadow_volumes, ShadowVolumePass::Create())}) {
-    if (!s.ok()) return s;
-  }
+  if (absl::Status s = assign(impl->shadows, ShadowMaps::Create(o)); !s.ok()) return s;
+  if (absl::Status s = assign(impl->gbuffer, GbufferPass::Create(o)); !s.ok()) return s;
   if (absl::Status s = assign(impl->projection, ProjectionPass::Create(o, cache_supported, impl->video, *impl->shadows));
       !s.ok()) {
     return s;
   }
+  if (absl::Status s = assign(impl->shadow_volumes, ShadowVolumePass::Create()); !s.ok()) return s;
   if (absl::Status s = assign(impl->resolve, ResolvePass::Create(o, cache_supported, impl->video, *impl->shadows));
       !s.ok()) {
     return s;
   }
+  if (absl::Status s = assign(impl->lines, LinePass::Create()); !s.ok()) return s;
   if (absl::Status s = CheckGl("Renderer::Create"); !s.ok()) return s;
   return std::unique_ptr<Renderer>(new Renderer(std::move(impl)));
 }
