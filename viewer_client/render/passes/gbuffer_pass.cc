@@ -1,0 +1,61 @@
+#include "viewer_client/render/passes/gbuffer_pass.h"
+
+#include "model_store/geometry/camera.h"
+
+namespace ave::viewer::internal {
+
+absl::Status GbufferTargets::Resize(int width, int height, const char* what) {
+  color = MakeTexture2D(GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE, width, height);
+  normal = MakeTexture2D(GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE, width, height);
+  depth = MakeTexture2D(GL_DEPTH_COMPONENT32F, GL_DEPTH_COMPONENT, GL_FLOAT, width, height);
+  const absl::Status complete =
+      AttachTextures(fbo, {{GL_COLOR_ATTACHMENT0, color}, {GL_COLOR_ATTACHMENT1, normal}, {GL_DEPTH_ATTACHMENT, depth}},
+                     what);
+  const GLenum gbuffers[] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1};
+  glDrawBuffers(2, gbuffers);
+  return complete;
+}
+
+absl::StatusOr<std::unique_ptr<GbufferPass>> GbufferPass::Create(const RendererOptions& options) {
+  absl::StatusOr<Program> program =
+      Program::Build("shaders/gbuffer.vert.glsl", "shaders/gbuffer.frag.glsl", "",
+                     {"u_clip_from_local", "u_sun_direction", "u_ambient", "u_diffuse", "u_sky_color"});
+  if (!program.ok()) return program.status();
+  return std::unique_ptr<GbufferPass>(new GbufferPass(options, *std::move(program)));
+}
+
+void GbufferPass::ApplyState() {
+  ResetPassState();
+  glEnable(GL_SCISSOR_TEST);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LESS);
+  glDepthMask(GL_TRUE);
+}
+
+void GbufferPass::Clear() {
+  glClearColor(0, 0, 0, 0);
+  glClearDepth(1.0);
+  glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+}
+
+void GbufferPass::Draw(const View& view, const SceneLayers& layers, bool with_static, bool with_dynamic,
+                       RenderStats& stats) const {
+  ApplyState();
+  glUseProgram(program_.id);
+  const Uniforms& u = program_.u;
+  glUniformMatrix4fv(u["u_clip_from_local"], 1, GL_FALSE, ToGlArray(view.projection * view.view).data());
+  const Eigen::Vector3f sun = options_.sun_direction.normalized();
+  glUniform3f(u["u_sun_direction"], sun.x(), sun.y(), sun.z());
+  glUniform1f(u["u_ambient"], options_.ambient);
+  glUniform1f(u["u_diffuse"], options_.diffuse);
+  glUniform3f(u["u_sky_color"], view.clear_color.x(), view.clear_color.y(), view.clear_color.z());
+  if (with_static) layers.statics.DrawChunks(view.projection * view.view, stats);
+  // The static model is drawn from both sides (open terrain); models and sky are closed or seen
+  // from inside: back faces culled.
+  glEnable(GL_CULL_FACE);
+  glCullFace(GL_BACK);
+  if (with_dynamic) layers.dynamics.Draw();
+  layers.sky.Draw(with_static && options_.display.sky);
+}
+
+}  // namespace ave::viewer::internal
