@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <thread>
 
@@ -355,6 +356,19 @@ TEST(Store, File_UnopenablePathNamesThePath) {
   const auto s = Store::Open("/nonexistent-dir-for-ave/model.db").status();
   EXPECT_FALSE(s.ok());
   EXPECT_THAT(s.message(), HasSubstr("/nonexistent-dir-for-ave/model.db"));
+}
+
+// Issue 14: --store / --db pointing at a file that is not SQLite (a LAS file, say).
+TEST(Store, File_NotADatabaseNamesThePath) {
+  const std::string path = ::testing::TempDir() + "/ave_not_a_db.las";
+  {
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    out << "LASF" << std::string(4096, '\x07');
+  }
+  const auto s = Store::Open(path).status();
+  EXPECT_FALSE(s.ok());
+  EXPECT_THAT(s.message(), HasSubstr(path));
+  std::remove(path.c_str());
 }
 
 TEST(Store, Audit_IsNewestFirstAndAppendOnly) {
