@@ -266,7 +266,9 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
         AVE_LOG(ERROR) << "camera '" << id << "': refused by the server: " << status.error_message();
         return absl::Status(static_cast<absl::StatusCode>(status.error_code()), status.error_message());
       }
-      if (source_done) break;
+      // --max-frames / --duration reached while the server is away: stop (the backoff below would
+      // return at once and the loop reconnect without pause, for ever; found for issue 14).
+      if (source_done || limited(Clock::now())) break;
       // Jittered exponential backoff: a random wait in [backoff/2, backoff], then double it. The
       // camera keeps capturing meanwhile; each frame's metadata goes to the buffer.
       std::uniform_int_distribution<int64_t> jitter(backoff.count() / 2, backoff.count());
