@@ -371,6 +371,29 @@ TEST(Store, File_NotADatabaseNamesThePath) {
   std::remove(path.c_str());
 }
 
+// Issue 14: a camera row edited outside ave is refused on read, naming the store and the camera,
+// instead of reaching the server's registry with a zero focal length.
+TEST(Store, File_CameraRowEditedOutsideIsRefusedOnRead) {
+  TempDir dir;
+  const std::string path = dir.File("edited.db");
+  {
+    auto store = OpenOrDie(path);
+    ASSERT_TRUE(store);
+    ASSERT_TRUE(store->AddCamera(MakeCamera("gate-1")).ok());
+  }
+  {
+    RawDb raw(path);
+    ASSERT_EQ(raw.Exec("UPDATE cameras SET fx = 0 WHERE id = 'gate-1'"), SQLITE_OK) << raw.Error();
+  }
+  auto store = OpenOrDie(path);
+  ASSERT_TRUE(store);
+  for (const absl::Status& s : {store->ListCameras().status(), store->GetCamera("gate-1").status()}) {
+    EXPECT_TRUE(absl::IsDataLoss(s)) << s;
+    EXPECT_THAT(s.message(), HasSubstr(path));
+    EXPECT_THAT(s.message(), HasSubstr("camera 'gate-1': intrinsics.fx"));
+  }
+}
+
 TEST(Store, Audit_IsNewestFirstAndAppendOnly) {
   TempDir dir;
   const std::string path = dir.File("audit.db");

@@ -15,9 +15,9 @@ int main(int argc, char** argv) {
   CLI::App app{"ave-calibrate: camera intrinsics from chessboard images (Zhang's method)"};
   app.add_option("--images", images, "glob of chessboard images, e.g. 'DIR/*.jpg' (quote it)")->required();
   app.add_option("--board", board_text, "inner corners COLSxROWS, e.g. 9x6")->required();
-  app.add_option("--square", square_m, "side of one square (metres)")->required()->check(CLI::PositiveNumber);
+  app.add_option("--square", square_m, "side of one square (metres)")->required()->check(ave::cli::PositiveNumber());
   app.add_option("--out", out, "intrinsics YAML to write (ave-agent / ave-admin --intrinsics)")->required();
-  app.add_option("--min-views", min_views, "fewest usable views accepted")->capture_default_str()->check(CLI::Range(3, 1000));
+  app.add_option("--min-views", min_views, "fewest usable views accepted")->capture_default_str()->check(ave::cli::Range(3, 1000));
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-calibrate")) return *exit_code;
   ave::calib::BoardSpec board;
   board.square_m = square_m;
