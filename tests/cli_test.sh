@@ -75,6 +75,7 @@ expect_error "agent --fps nan" "fps" "${A[@]}" --fps nan
 expect_error "agent --latency nan" "--latency" "${A[@]}" --detect-only --out - --latency nan
 expect_error "agent --position 2 values" "--position/--look-at" "${A[@]}" --position 1,2 --look-at 1,2,3
 expect_error "agent --detect-only --out missing" "$missing/t.jsonl" "${A[@]}" --detect-only --out "$missing/t.jsonl"
+expect_error "agent --spill folder missing" "--spill $missing/a.meta: no folder" "${A[@]}" --spill "$missing/a.meta"
 out=$(timeout 30 "${A[@]}" --duration 0.3 2>&1); rc=$?   # a --duration ends the agent even with no server
 if [ $rc -ne 0 ]; then echo "FAIL agent --duration with no server: exit $rc: $(tail -2 <<<"$out")"; fail=1; fi
 AD=("$bin/ave-admin" --server 127.0.0.1:1 --token t)
@@ -111,6 +112,7 @@ expect_error "sim --fps nan" "--fps" "$bin/ave-sim" camera --scenario minimal --
 expect_error "sim --start nan" "--start" "$bin/ave-sim" camera --scenario minimal --camera cam1 --out "$tmp/sim" --start nan
 expect_error "sim --seconds nan" "--seconds" "$bin/ave-sim" rotating-lidar --scenario courtyard --out "$tmp/sim" --seconds nan
 expect_error "calibrate --square nan" "square" "$bin/ave-calibrate" --images "$tmp/junk" --board 9x6 --square nan --out "$tmp/k.yaml"
+expect_error "calibrate --out folder missing" "--out $missing/k.yaml: no folder" "$bin/ave-calibrate" --images "$tmp/junk" --board 9x6 --square 0.02 --out "$missing/k.yaml"
 expect_error "calibrate --images not images" "board was found in 0 of 1" "$bin/ave-calibrate" --images "$tmp/junk" --board 9x6 --square 0.02 --out "$tmp/k.yaml"
 expect_error "loadgen --server-bin missing" "--server-bin $missing/ave-server" "$bin/ave-loadgen" --server-bin "$missing/ave-server" --duration 1 --streams 1
 expect_error "loadgen --duration nan" "--duration" "$bin/ave-loadgen" --duration nan

@@ -2,6 +2,7 @@
 //   ave-calibrate --images 'DIR/*.jpg' --board 9x6 --square 0.025 --out cam.yaml
 // COLSxROWS counts inner corners. Prints a one-line JSON summary; exit 1 when the images cannot
 // constrain the model (too few views, all views parallel), 2 on a bad flag.
+#include <filesystem>
 #include <iostream>
 
 #include "model_store/common/cli.h"
@@ -23,6 +24,12 @@ int main(int argc, char** argv) {
   board.square_m = square_m;
   if (!ave::calib::ParseBoardSize(board_text, board.cols, board.rows)) {
     std::cerr << "ave-calibrate: --board must be COLSxROWS (inner corners), got '" << board_text << "'\n";
+    return 2;
+  }
+  // The result is written last: a missing folder is said before the (slow) calibration.
+  if (const std::filesystem::path folder = std::filesystem::path(out).parent_path();
+      !folder.empty() && !std::filesystem::is_directory(folder)) {
+    std::cerr << "ave-calibrate: --out " << out << ": no folder " << folder.string() << "\n";
     return 2;
   }
   const std::vector<std::string> paths = ave::calib::GlobFiles(images);

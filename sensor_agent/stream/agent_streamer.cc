@@ -85,6 +85,10 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
     spill = (std::filesystem::temp_directory_path() / absl::StrCat("ave-agent-", id, "-", ::getpid(), ".meta")).string();
   } else if (spill == "-") {
     spill.clear();
+  } else if (const std::filesystem::path folder = std::filesystem::path(spill).parent_path();
+             !folder.empty() && !std::filesystem::is_directory(folder)) {
+    // Otherwise the first long outage would drop its records silently (counted only).
+    return absl::InvalidArgumentError(absl::StrCat("camera '", id, "': --spill ", spill, ": no folder ", folder.string()));
   }
   MetadataBuffer buffer({.max_in_memory = options_.metadata_in_memory,
                          .spill_path = spill,

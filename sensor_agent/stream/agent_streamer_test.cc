@@ -62,6 +62,21 @@ TEST(AgentLimits, DurationEndsTheRunWhileTheServerIsUnreachable) {
   EXPECT_GT(streamer.stats().metadata_buffered, 0);
 }
 
+TEST(AgentLimits, SpillFileInAMissingFolderIsRefusedUpFront) {
+  AgentOptions options;
+  options.server = "127.0.0.1:1";
+  options.camera_id = "cam";
+  options.spill_path = "/nonexistent-ave-folder/cam.meta";
+  AgentStreamer streamer(options, std::make_unique<FakeSource>());
+  std::atomic<bool> stop{false};
+  const absl::Status status = streamer.Run(stop);
+  EXPECT_EQ(status.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(std::string(status.message()).find("camera 'cam': --spill /nonexistent-ave-folder/cam.meta: no folder"),
+            std::string::npos)
+      << status;
+  EXPECT_EQ(streamer.stats().connects, 0);
+}
+
 class AgentFaults : public ::testing::Test {
  protected:
   void SetUp() override {
