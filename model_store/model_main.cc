@@ -58,7 +58,7 @@ struct InputFlags {
 
   void Add(CLI::App* sub) {
     sub->add_option("--input", input, "point cloud: .las (1.2-1.4), .ply or .pcd")->required();
-    sub->add_option("--resolution", resolution_m, "grid resolution in metres")->check(CLI::Range(0.05, 100.0));
+    sub->add_option("--resolution", resolution_m, "grid resolution in metres")->check(ave::cli::Range(0.05, 100.0));
     sub->add_option("--units", units, "override the input's linear unit: m, ft, us-ft or metres per unit");
     sub->add_option("--max-window", options.ground.max_window_m, "ground filter: largest opening window (m)");
     sub->add_option("--slope", options.ground.slope, "ground filter: terrain slope allowed (m/m)");
@@ -246,6 +246,8 @@ int RunClassify(const InputFlags& in, const std::string& out) {
 }
 
 int RunExport(const std::string& db_path, const std::string& out) {
+  // Opening creates a missing store: a mistyped --db would leave an empty file behind.
+  if (!std::filesystem::is_regular_file(db_path)) return Fail(db_path + ": no such model store (--db)");
   absl::StatusOr<std::unique_ptr<ave::store::Store>> store = ave::store::Store::Open(db_path);
   if (!store.ok()) return Fail(std::string(store.status().message()));
   if (out.size() > 4 && out.substr(out.size() - 4) == ".exr") {

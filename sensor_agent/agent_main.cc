@@ -65,8 +65,8 @@ int main(int argc, char** argv) {
   app.add_option("--camera", options.camera_id, "this camera's registered id (required unless --detect-only)");
   app.add_option("--token", options.token, "sensor bearer token (env AVE_SENSOR_TOKEN)");
   app.add_option("--source", source_spec, "sim:campus#ID, file:PATH, rtsp://..., v4l2:/dev/videoN")->required();
-  app.add_option("--fps", options.fps, "frames per second to send")->capture_default_str()->check(CLI::Range(0.1, 240.0));
-  app.add_option("--jpeg-quality", options.jpeg_quality, "JPEG quality 1..100")->capture_default_str()->check(CLI::Range(1, 100));
+  app.add_option("--fps", options.fps, "frames per second to send")->capture_default_str()->check(ave::cli::Range(0.1, 240.0));
+  app.add_option("--jpeg-quality", options.jpeg_quality, "JPEG quality 1..100")->capture_default_str()->check(ave::cli::Range(1, 100));
   app.add_option("--max-frames", options.max_frames, "stop after N frames (0 = never)")->capture_default_str();
   app.add_option("--duration", options.duration_s, "stop after S seconds (0 = never)")->capture_default_str();
   app.add_option("--tls-ca", options.tls.ca_file, "PEM CA of the server certificate: use TLS (env AVE_TLS_CA)");
@@ -78,7 +78,7 @@ int main(int argc, char** argv) {
   app.add_option("--spill", options.spill_path,
                  "file for metadata buffered during long outages (default: temp dir; '-' = memory only)");
   app.add_option("--metadata-buffer", options.metadata_in_memory, "metadata records kept in memory during an outage")
-      ->capture_default_str()->check(CLI::Range(1, 1 << 24));
+      ->capture_default_str()->check(ave::cli::Range(1, 1 << 24));
   app.add_option("--position", position, "mounting position x,y,z (m, site frame) for sources without a pose");
   app.add_option("--look-at", look_at, "point x,y,z the mounted camera looks at");
   app.add_option("--fov", fov_deg, "horizontal field of view (deg) for sources without intrinsics")->capture_default_str();
@@ -100,7 +100,7 @@ int main(int argc, char** argv) {
   app.add_option("--latency", latency_s,
                  "--detect-only: hold each frame's record S seconds (source time) and write back the boxes of tracks "
                  "validated meanwhile (default: the validation time, 1 s; 0 = live output)")
-      ->check(CLI::Range(0.0, 3600.0));
+      ->check(ave::cli::Range(0.0, 3600.0));
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-agent")) return *exit_code;
   ave::detect::DetectorOptions detector_options;
   ave::detect::ParseBackgroundKind(background, detector_options.background);

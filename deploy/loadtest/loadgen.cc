@@ -31,6 +31,7 @@
 #include "ave/net/tls.h"
 #include "ave/v1/ave.grpc.pb.h"
 #include "fusion_server/admin/admin_client.h"
+#include "model_store/common/cli.h"
 #include "fusion_server/core/convert.h"
 #include "model_store/common/log.h"
 
@@ -97,6 +98,9 @@ struct ServerProcess {
 
 absl::StatusOr<ServerProcess> StartServer(const Options& o, int64_t max_frame_bytes) {
   ServerProcess p;
+  if (::access(o.server_bin.c_str(), X_OK) != 0) {
+    return absl::NotFoundError("--server-bin " + o.server_bin + ": not an executable file");
+  }
   p.dir = std::filesystem::temp_directory_path() / ("ave_loadgen_" + std::to_string(::getpid()));
   std::filesystem::create_directories(p.dir);
   const std::string out_path = (p.dir / "server.out").string();
@@ -246,16 +250,16 @@ void Plot(const std::string& path, const std::vector<std::unique_ptr<PerSecond>>
 int main(int argc, char** argv) {
   Options o;
   CLI::App app{"ave-loadgen: N simulated agents + M viewers against a loopback ave-server; JSON summary last"};
-  app.add_option("--streams", o.streams, "simulated agents (cameras)")->capture_default_str()->check(CLI::Range(1, 2000));
-  app.add_option("--viewers", o.viewers, "subscribing viewers")->capture_default_str()->check(CLI::Range(0, 64));
-  app.add_option("--fps", o.fps, "JPEG frames per second per stream")->capture_default_str()->check(CLI::Range(0.5, 120.0));
+  app.add_option("--streams", o.streams, "simulated agents (cameras)")->capture_default_str()->check(ave::cli::Range(1, 2000));
+  app.add_option("--viewers", o.viewers, "subscribing viewers")->capture_default_str()->check(ave::cli::Range(0, 64));
+  app.add_option("--fps", o.fps, "JPEG frames per second per stream")->capture_default_str()->check(ave::cli::Range(0.5, 120.0));
   app.add_option("--pose-hz", o.pose_hz, "pose updates per second per stream (metadata-only between frames; 0 = with frames only)")
-      ->capture_default_str()->check(CLI::Range(0.0, 120.0));
-  app.add_option("--boxes", o.boxes, "boxes per frame")->capture_default_str()->check(CLI::Range(0, 64));
+      ->capture_default_str()->check(ave::cli::Range(0.0, 120.0));
+  app.add_option("--boxes", o.boxes, "boxes per frame")->capture_default_str()->check(ave::cli::Range(0, 64));
   app.add_option("--size", o.size, "frame size")->capture_default_str()->check(CLI::IsMember({"640x480", "1920x1080"}));
-  app.add_option("--quality", o.quality, "JPEG quality of the pre-encoded frames")->capture_default_str()->check(CLI::Range(1, 100));
-  app.add_option("--duration", o.duration_s, "seconds of load (stops by itself)")->capture_default_str()->check(CLI::Range(1.0, 600.0));
-  app.add_option("--warmup", o.warmup_s, "seconds at the start left out of latency figures")->capture_default_str();
+  app.add_option("--quality", o.quality, "JPEG quality of the pre-encoded frames")->capture_default_str()->check(ave::cli::Range(1, 100));
+  app.add_option("--duration", o.duration_s, "seconds of load (stops by itself)")->capture_default_str()->check(ave::cli::Range(1.0, 600.0));
+  app.add_option("--warmup", o.warmup_s, "seconds at the start left out of latency figures")->capture_default_str()->check(ave::cli::Range(0.0, 600.0));
   app.add_option("--server", o.server, "host:port of a running loopback server (default: start one)");
   app.add_option("--server-bin", o.server_bin, "ave-server to start (default: next to this program)");
   app.add_option("--server-pid", o.server_pid, "pid of the --server process, for CPU and memory figures");
@@ -263,12 +267,13 @@ int main(int argc, char** argv) {
   app.add_option("--viewer-token", o.viewer_token, "with --server: viewer token (env AVE_VIEWER_TOKEN)");
   app.add_option("--admin-token", o.admin_token, "with --server: admin token (env AVE_ADMIN_TOKEN)");
   app.add_option("--tls-ca", o.tls_ca, "with --server: PEM CA when the server speaks TLS");
-  app.add_option("--viewer-rate", o.viewer_rate_hz, "update rate viewers ask for (Hz)")->capture_default_str();
+  app.add_option("--viewer-rate", o.viewer_rate_hz, "update rate viewers ask for (Hz)")->capture_default_str()->check(ave::cli::Range(0.1, 1000.0));
   app.add_option("--plot", o.plot, "PNG plot over time")->capture_default_str();
   app.add_option("--max-drops", o.max_drops, "exit 1 if viewers skipped more frames than this (-1 = no check)");
-  app.add_option("--max-p99-ms", o.max_p99_ms, "exit 1 if p99 latency exceeds this (0 = no check)");
+  app.add_option("--max-p99-ms", o.max_p99_ms, "exit 1 if p99 latency exceeds this (0 = no check)")->check(ave::cli::Range(0.0, 1e9));
   app.add_option("--min-received-ratio", o.min_received_ratio,
-                 "exit 1 if a viewer received less than this share of the frames sent (0 = no check)");
+                 "exit 1 if a viewer received less than this share of the frames sent (0 = no check)")
+      ->check(ave::cli::Range(0.0, 1.0));
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

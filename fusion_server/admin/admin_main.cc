@@ -68,7 +68,7 @@ int main(int argc, char** argv) {
     sub->add_option("--id", id, "camera id ([A-Za-z0-9_.-], 1..64)")->required();
     sub->add_option("--name", name, "display name");
     sub->add_option("--size", size, "image size WIDTHxHEIGHT")->capture_default_str();
-    sub->add_option("--fov", fov_deg, "horizontal field of view, degrees")->capture_default_str();
+    sub->add_option("--fov", fov_deg, "horizontal field of view, degrees")->capture_default_str()->check(ave::cli::Range(1.0, 179.0));
     sub->add_option("--intrinsics", intrinsics_file, "intrinsics YAML from ave-calibrate (replaces --size and --fov)");
     sub->add_option("--position", position, "camera centre x,y,z in the site's local frame (m)")->required();
     sub->add_option("--look-at", look_at, "point x,y,z the camera looks at");

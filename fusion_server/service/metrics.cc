@@ -6,6 +6,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <cstring>
 
 #include "absl/strings/numbers.h"
@@ -125,8 +126,11 @@ void MetricsHttpServer::Loop() {
     ::setsockopt(client, SOL_SOCKET, SO_SNDTIMEO, &tv, sizeof tv);
     std::string request;
     char buffer[1024];
+    // 1 s for the whole request, not per recv: a client trickling a byte a second would hold
+    // this (single) loop for an hour (issue 14).
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(1);
     while (request.size() < 4096 && request.find("\r\n\r\n") == std::string::npos &&
-           request.find("\n\n") == std::string::npos) {
+           request.find("\n\n") == std::string::npos && std::chrono::steady_clock::now() < deadline) {
       const ssize_t n = ::recv(client, buffer, sizeof buffer, 0);
       if (n <= 0) break;
       request.append(buffer, static_cast<size_t>(n));

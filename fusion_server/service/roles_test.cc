@@ -339,6 +339,47 @@ TEST_F(Operations, HealthServiceServesUntilShutdown) {
   EXPECT_EQ(response.status(), grpc::health::v1::HealthCheckResponse::SERVING);
 }
 
+// Sends `bytes` (nothing if empty) on a fresh connection to the metrics port and returns the reply.
+std::string HttpRaw(int port, const std::string& bytes) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_port = htons(static_cast<uint16_t>(port));
+  inet_pton(AF_INET, "127.0.0.1", &addr.sin_addr);
+  if (::connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) {
+    ::close(fd);
+    return "";
+  }
+  if (!bytes.empty()) (void)!::send(fd, bytes.data(), bytes.size(), MSG_NOSIGNAL);
+  std::string response;
+  char buffer[4096];
+  ssize_t n;
+  while ((n = ::recv(fd, buffer, sizeof buffer, 0)) > 0) response.append(buffer, static_cast<size_t>(n));
+  ::close(fd);
+  return response;
+}
+
+// Issue 14: the two side doors. An unknown health-service name is NOT_FOUND; an oversized,
+// garbage or silent request to the metrics port gets a 404 (or is closed) and the port keeps
+// serving.
+TEST_F(Operations, UnknownHealthNamesAndBadMetricsRequestsAreRefusedAndServingGoesOn) {
+  StartServer();
+  auto health = grpc::health::v1::Health::NewStub(Channel());
+  grpc::ClientContext context;
+  grpc::health::v1::HealthCheckRequest request;
+  request.set_service("no.such.Service");
+  grpc::health::v1::HealthCheckResponse response;
+  EXPECT_EQ(health->Check(&context, request, &response).error_code(), grpc::StatusCode::NOT_FOUND);
+
+  const int port = server_->metrics_port();
+  ASSERT_GT(port, 0);
+  EXPECT_THAT(HttpRaw(port, std::string(5000, 'A')), HasSubstr("HTTP/1.0 404"));
+  EXPECT_THAT(HttpRaw(port, std::string("\x00\xff\r\n\r\n", 6)), HasSubstr("HTTP/1.0 404"));
+  EXPECT_THAT(HttpRaw(port, "POST /metrics HTTP/1.0\r\n\r\n"), HasSubstr("HTTP/1.0 404"));
+  EXPECT_THAT(HttpRaw(port, ""), HasSubstr("HTTP/1.0 404"));  // silent: answered after the 1 s bound
+  EXPECT_THAT(HttpGet(port, "/metrics"), HasSubstr("HTTP/1.0 200 OK"));
+}
+
 TEST_F(Operations, MetricsCountFramesInAndOutAndRefusals) {
   StartServer();
   ASSERT_GT(server_->metrics_port(), 0);

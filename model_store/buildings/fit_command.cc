@@ -12,6 +12,7 @@
 
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
+#include "model_store/common/cli.h"
 #include "model_store/lidar/point_cloud_io.h"
 #include "model_store/terrain/terrain.h"
 
@@ -146,9 +147,9 @@ void AddFitCommand(CLI::App& app) {
   fit->add_option("--click", options->click, "a point x,y on the building's roof (metres)");
   fit->add_option("--type", options->type, "box, wedge, cylinder, sphere or polyhedron")->required();
   fit->add_option("--roof", options->roof, "roof for wedge/polyhedron: flat, shed, gable, hip");
-  fit->add_option("--resolution", options->resolution_m, "grid resolution (m)")->check(CLI::PositiveNumber);
+  fit->add_option("--resolution", options->resolution_m, "grid resolution (m)")->check(ave::cli::PositiveNumber());
   fit->add_flag("--local", options->local, "coordinates are relative to the cloud's origin, not world");
-  fit->add_option("--units", options->units, "metres per file unit (overrides the file's CRS)")->check(CLI::PositiveNumber);
+  fit->add_option("--units", options->units, "metres per file unit (overrides the file's CRS)")->check(ave::cli::PositiveNumber());
   fit->add_option("--db", options->db, "model store (SQLite) to add the building to");
   // Runs when parsing succeeds; a failure ends the process with its exit code (1), success
   // returns to ave-model's main, which exits 0.

@@ -1,7 +1,10 @@
 #pragma once
 // Shared command-line conventions of the ave-* executables (only their mains include this):
 // --help exits 0, a bad flag exits 2 with one line naming it, and "x,y,z" triples parse strictly.
+#include <cmath>
+#include <cstdlib>
 #include <iostream>
+#include <limits>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -22,6 +25,27 @@ inline std::optional<int> Parse(CLI::App& app, int argc, char** argv, const std:
   }
   return std::nullopt;
 }
+
+// CLI::Range and CLI::PositiveNumber let "nan" through (every comparison with NaN is false): a
+// NaN --duration crashed ave-loadgen and a NaN --fps made ave-sim write NaN times (issue 14).
+// These take a finite number within [min, max] only; integers flags still parse as integers.
+inline CLI::Validator Range(double min, double max) {
+  std::ostringstream desc;
+  desc << "in [" << min << ", " << max << "]";
+  return CLI::Validator(
+      [min, max](std::string& text) -> std::string {
+        char* end = nullptr;
+        const double v = std::strtod(text.c_str(), &end);
+        if (end == text.c_str() || *end != '\0' || !std::isfinite(v) || v < min || v > max) {
+          std::ostringstream why;
+          why << "value " << text << " is not a finite number in [" << min << ", " << max << "]";
+          return why.str();
+        }
+        return {};
+      },
+      desc.str(), "FINITE_RANGE");
+}
+inline CLI::Validator PositiveNumber() { return Range(std::numeric_limits<double>::min(), std::numeric_limits<double>::max()); }
 
 // "x,y,z" (metres, site frame) -> a vector; false on any other shape.
 inline bool ParseVec3(const std::string& text, Eigen::Vector3d& out) {

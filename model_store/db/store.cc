@@ -382,7 +382,10 @@ absl::StatusOr<CameraRecord> Store::GetCamera(const std::string& id) {
   AVE_RETURN_IF_ERROR(stmt.Bind(id));
   AVE_ASSIGN_OR_RETURN(row, stmt.Step());
   if (!row) return absl::NotFoundError("camera '" + id + "' not found");
-  return ReadCamera(stmt);
+  CameraRecord camera = ReadCamera(stmt);
+  // Rows are validated on write; one edited outside ave (or by an older build) is refused here.
+  if (std::string why = ValidateCamera(camera); !why.empty()) return absl::DataLossError("model store '" + path() + "': " + why);
+  return camera;
 }
 
 absl::StatusOr<std::vector<CameraRecord>> Store::ListCameras() {
@@ -394,6 +397,9 @@ absl::StatusOr<std::vector<CameraRecord>> Store::ListCameras() {
     AVE_ASSIGN_OR_RETURN(row, stmt.Step());
     if (!row) return out;
     out.push_back(ReadCamera(stmt));
+    if (std::string why = ValidateCamera(out.back()); !why.empty()) {
+      return absl::DataLossError("model store '" + impl_->db->path() + "': " + why);
+    }
   }
 }
 

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <thread>
 
@@ -355,6 +356,42 @@ TEST(Store, File_UnopenablePathNamesThePath) {
   const auto s = Store::Open("/nonexistent-dir-for-ave/model.db").status();
   EXPECT_FALSE(s.ok());
   EXPECT_THAT(s.message(), HasSubstr("/nonexistent-dir-for-ave/model.db"));
+}
+
+// Issue 14: --store / --db pointing at a file that is not SQLite (a LAS file, say).
+TEST(Store, File_NotADatabaseNamesThePath) {
+  const std::string path = ::testing::TempDir() + "/ave_not_a_db.las";
+  {
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    out << "LASF" << std::string(4096, '\x07');
+  }
+  const auto s = Store::Open(path).status();
+  EXPECT_FALSE(s.ok());
+  EXPECT_THAT(s.message(), HasSubstr(path));
+  std::remove(path.c_str());
+}
+
+// Issue 14: a camera row edited outside ave is refused on read, naming the store and the camera,
+// instead of reaching the server's registry with a zero focal length.
+TEST(Store, File_CameraRowEditedOutsideIsRefusedOnRead) {
+  TempDir dir;
+  const std::string path = dir.File("edited.db");
+  {
+    auto store = OpenOrDie(path);
+    ASSERT_TRUE(store);
+    ASSERT_TRUE(store->AddCamera(MakeCamera("gate-1")).ok());
+  }
+  {
+    RawDb raw(path);
+    ASSERT_EQ(raw.Exec("UPDATE cameras SET fx = 0 WHERE id = 'gate-1'"), SQLITE_OK) << raw.Error();
+  }
+  auto store = OpenOrDie(path);
+  ASSERT_TRUE(store);
+  for (const absl::Status& s : {store->ListCameras().status(), store->GetCamera("gate-1").status()}) {
+    EXPECT_TRUE(absl::IsDataLoss(s)) << s;
+    EXPECT_THAT(s.message(), HasSubstr(path));
+    EXPECT_THAT(s.message(), HasSubstr("camera 'gate-1': intrinsics.fx"));
+  }
 }
 
 TEST(Store, Audit_IsNewestFirstAndAppendOnly) {

@@ -2,7 +2,13 @@
 // them out of widely included headers). Coordinates are read as stored (float32 or float64), so a
 // double-precision PCD keeps large world coordinates exact.
 #include <algorithm>
+#include <charconv>
 #include <cstring>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+#include <vector>
 
 #include "model_store/lidar/point_cloud_io.h"
 
@@ -15,6 +21,84 @@ namespace ave::model {
 
 #ifdef AVE_HAVE_PCL
 namespace {
+
+// PCL 1.13's PCDReader::read dereferences bad memory on some malformed headers (found while
+// writing issue 14's bad-input tests: a text file that is not a PCD crashed `ave-model build`).
+// The header is checked here first: the PCD 0.7 keywords up to DATA, x/y/z among the fields,
+// FIELDS/SIZE/TYPE/COUNT of one length, a point count, and for binary data enough bytes.
+absl::Status CheckPcdHeader(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::NotFoundError(path + ": cannot open");
+  std::map<std::string, std::vector<std::string>> keys;
+  std::string line;
+  int lines = 0;
+  while (std::getline(in, line) && lines++ < 64) {
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream words(line);
+    std::string key, word;
+    words >> key;
+    static const std::set<std::string> kKeys = {"VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH",
+                                                "HEIGHT", "VIEWPOINT", "POINTS", "DATA"};
+    if (!kKeys.count(key)) {
+      return absl::InvalidArgumentError(path + ": header line " + std::to_string(lines) + ": not a PCD header keyword '" +
+                                        key.substr(0, 40) + "'");
+    }
+    std::vector<std::string>& values = keys[key];
+    while (words >> word) values.push_back(word);
+    if (key == "DATA") break;
+  }
+  for (const char* required : {"FIELDS", "SIZE", "TYPE", "WIDTH", "POINTS", "DATA"}) {
+    if (!keys.count(required)) return absl::InvalidArgumentError(path + ": PCD header lacks " + required);
+  }
+  const std::vector<std::string>& fields = keys["FIELDS"];
+  const size_t n_fields = fields.size();
+  if (keys["SIZE"].size() != n_fields || keys["TYPE"].size() != n_fields ||
+      (keys.count("COUNT") && keys["COUNT"].size() != n_fields)) {
+    return absl::InvalidArgumentError(path + ": PCD header: FIELDS, SIZE, TYPE and COUNT differ in length");
+  }
+  for (const char* axis : {"x", "y", "z"}) {
+    if (std::find(fields.begin(), fields.end(), axis) == fields.end()) {
+      return absl::InvalidArgumentError(path + ": PCD lacks an x, y or z field");
+    }
+  }
+  auto number = [&](const std::string& text, uint64_t max, const char* what) -> absl::StatusOr<uint64_t> {
+    uint64_t v = 0;
+    const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+    if (ec != std::errc() || end != text.data() + text.size() || v > max) {
+      return absl::InvalidArgumentError(path + ": PCD header: " + what + " '" + text.substr(0, 40) + "' is not a count up to " +
+                                        std::to_string(max));
+    }
+    return v;
+  };
+  size_t point_bytes = 0;
+  for (size_t i = 0; i < n_fields; ++i) {
+    absl::StatusOr<uint64_t> size = number(keys["SIZE"][i], 8, "SIZE");
+    if (!size.ok()) return size.status();
+    absl::StatusOr<uint64_t> count = keys.count("COUNT") ? number(keys["COUNT"][i], 1 << 16, "COUNT") : uint64_t{1};
+    if (!count.ok()) return count.status();
+    point_bytes += *size * *count;
+  }
+  if (keys["POINTS"].size() != 1) return absl::InvalidArgumentError(path + ": PCD header: POINTS takes one value");
+  absl::StatusOr<uint64_t> points = number(keys["POINTS"][0], uint64_t{1} << 32, "POINTS");
+  if (!points.ok()) return points.status();
+  if (*points == 0) return absl::InvalidArgumentError(path + ": PCD holds no points (POINTS 0)");
+  const std::string data = keys["DATA"].empty() ? "" : keys["DATA"][0];
+  if (data != "ascii" && data != "binary" && data != "binary_compressed") {
+    return absl::InvalidArgumentError(path + ": PCD header: DATA must be ascii, binary or binary_compressed, not '" +
+                                      data.substr(0, 40) + "'");
+  }
+  if (data == "binary") {
+    const std::streamoff body = in.tellg();
+    in.seekg(0, std::ios::end);
+    const std::streamoff file_bytes = in.tellg();
+    if (body < 0 || file_bytes < 0 || static_cast<uint64_t>(file_bytes - body) < *points * point_bytes) {
+      return absl::InvalidArgumentError(path + ": PCD data shorter than its header says (" + std::to_string(*points) +
+                                        " points of " + std::to_string(point_bytes) + " bytes)");
+    }
+  }
+  return absl::OkStatus();
+}
 
 const pcl::PCLPointField* FindField(const pcl::PCLPointCloud2& blob, const std::string& name) {
   for (const auto& f : blob.fields) {
@@ -42,6 +126,7 @@ double FieldValue(const uint8_t* p, const pcl::PCLPointField& f) {
 bool HavePcdSupport() { return true; }
 
 absl::StatusOr<PointCloud> ReadPcd(const std::string& path, const CloudReadOptions& options) {
+  if (absl::Status s = CheckPcdHeader(path); !s.ok()) return s;
   pcl::PCLPointCloud2 blob;
   pcl::PCDReader reader;
   if (reader.read(path, blob) < 0) return absl::InvalidArgumentError(path + ": PCL could not read this PCD file");

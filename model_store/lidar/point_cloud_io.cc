@@ -134,7 +134,11 @@ absl::StatusOr<PointCloud> ParsePly(std::string_view bytes, const std::string& n
       for (double& x : values) {
         std::string token;
         if (!(text >> token)) return absl::InvalidArgumentError(name + ": vertex " + std::to_string(k) + " of " + std::to_string(v.count) + ": truncated");
-        x = std::strtod(token.c_str(), nullptr);  // accepts nan / inf, which Add() rejects and counts
+        char* parsed_end = nullptr;
+        x = std::strtod(token.c_str(), &parsed_end);  // accepts nan / inf, which Add() rejects and counts
+        if (parsed_end == token.c_str() || *parsed_end != '\0') {
+          return absl::InvalidArgumentError(name + ": vertex " + std::to_string(k) + ": not a number '" + token.substr(0, 40) + "'");
+        }
       }
       add();
     }

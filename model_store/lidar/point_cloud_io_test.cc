@@ -43,6 +43,38 @@ TEST(Ply, BinaryDoublesNear1e7KeepMillimetres) {
   EXPECT_THAT(std::string(cut.message()), HasSubstr("c.ply: byte offset"));
 }
 
+// Issue 14: every header mistake and every body mistake names the file.
+TEST(Ply, BadHeadersAndBodiesNameTheFile) {
+  const std::string head = "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
+  struct Case {
+    std::string bytes;
+    const char* names;
+  };
+  for (const Case& c : std::vector<Case>{
+           {"", "d.ply: byte offset 0: not a PLY file"},
+           {"PLY\n", "d.ply: byte offset 0: not a PLY file"},
+           {"ply\nformat ascii 1.0\nelement vertex 1\n", "d.ply: no end_header line"},
+           {"ply\nformat ascii 1.0\nend_header", "d.ply: byte offset"},
+           {"ply\nformat utf8 1.0\nelement vertex 1\nproperty float x\nend_header\n", "d.ply: unknown PLY format 'utf8'"},
+           {"ply\nformat ascii 1.0\nelement vertex 1\nproperty half x\nend_header\n", "d.ply: unknown PLY property type 'half'"},
+           {"ply\nformat ascii 1.0\nelement face 1\nend_header\n", "d.ply: the first PLY element must be 'vertex'"},
+           {"ply\nformat ascii 1.0\nelement vertex 1\nproperty list uchar int i\nproperty float x\nend_header\n",
+            "d.ply: list properties"},
+           {"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n1 2\n",
+            "d.ply: PLY vertex element lacks x, y or z"},
+           {head + "1 2 3\n", "d.ply: vertex 1 of 2: truncated"},
+           {head + "1 2 3\n4 five 6\n", "d.ply: vertex 1: not a number 'five'"},
+           {head + "1 2 3\n4 5 6e\n", "d.ply: vertex 1: not a number '6e'"},
+           {"ply\nformat binary_little_endian 1.0\nelement vertex 4000000000\nproperty double x\nproperty double y\n"
+            "property double z\nend_header\n" + std::string(48, '\0'),
+            "d.ply: byte offset"},
+       }) {
+    SCOPED_TRACE(c.bytes.substr(0, 60));
+    EXPECT_THAT(std::string(ParsePly(c.bytes, "d.ply").status().message()), HasSubstr(c.names));
+  }
+  EXPECT_THAT(std::string(ReadPointCloud("/nonexistent-dir/x.ply").status().message()), HasSubstr("/nonexistent-dir/x.ply"));
+}
+
 TEST(PointCloudIo, DispatchesByExtensionAndNamesUnknownOnes) {
   EXPECT_THAT(std::string(ReadPointCloud("/tmp/x.xyz").status().message()), HasSubstr("unknown point cloud extension"));
   EXPECT_THAT(std::string(ReadPointCloud("/tmp/x.laz").status().message()), HasSubstr("LAZ"));
@@ -61,6 +93,28 @@ TEST(PointCloudIo, ReadsPcdThroughPcl) {
   ASSERT_EQ(cloud->size(), 2u);
   EXPECT_EQ(cloud->rejected_non_finite, 1u);
   EXPECT_NEAR((cloud->origin + cloud->xyz[1].cast<double>()).y(), 3768201.5, 1e-4);
+  std::remove(path.c_str());
+}
+
+TEST(PointCloudIo, BadPcdFilesNameTheFile) {
+  if (!HavePcdSupport()) GTEST_SKIP() << "built without PCL";
+  const std::string path = ::testing::TempDir() + "/ave_bad_cloud.pcd";
+  for (const std::string& text : {std::string("not a point cloud at all\n"), std::string(""),
+                                  std::string("VERSION .7\nFIELDS a b\nSIZE 4 4\nTYPE F F\nCOUNT 1 1\nWIDTH 1\nHEIGHT 1\n"
+                                              "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1\nDATA ascii\n1 2\n"),
+                                  std::string("VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 0\n"
+                                              "HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 0\nDATA ascii\n"),
+                                  std::string("VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\n"
+                                              "HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n1 2 3\n"),
+                                  std::string("VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1000\n"
+                                              "HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1000\nDATA binary\n\x01\x02")}) {
+    SCOPED_TRACE(text.substr(0, 40));
+    ASSERT_TRUE(WriteWholeFile(path, text).ok());
+    absl::StatusOr<PointCloud> cloud = ReadPointCloud(path);
+    EXPECT_FALSE(cloud.ok());
+    EXPECT_THAT(std::string(cloud.status().message()), HasSubstr(path));
+  }
+  EXPECT_THAT(std::string(ReadPointCloud("/nonexistent-dir/x.pcd").status().message()), HasSubstr("/nonexistent-dir/x.pcd"));
   std::remove(path.c_str());
 }
 

@@ -5,6 +5,7 @@
 #include <fstream>
 #include <map>
 #include <sstream>
+#include <type_traits>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
@@ -59,6 +60,9 @@ class CsvReader {
     const auto [end, ec] = std::from_chars(f.data(), f.data() + f.size(), value);
     if (ec != std::errc() || end != f.data() + f.size()) {
       return Error(column, absl::StrCat("not ", what, " '", f, "'"));
+    }
+    if constexpr (std::is_floating_point_v<T>) {
+      if (!std::isfinite(value)) return Error(column, absl::StrCat("not finite '", f, "'"));
     }
     return value;
   }

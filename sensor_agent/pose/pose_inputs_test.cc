@@ -151,6 +151,29 @@ TEST(SensorLog, ReadsTheSimulatorLogAtWorldCoordinatesNear1e6Metres) {
   EXPECT_THAT(ReadSensorLog(dir.string(), streams.origin).status().message(), HasSubstr("cannot open"));
 }
 
+// Issue 14: "nan" and "inf" parse as numbers; a log carrying them is refused by file, line and
+// column instead of reaching the filter (a NaN quaternion passed the unit-norm check).
+TEST(SensorLog, NonFiniteValuesAreRefusedByLineAndColumn) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::temp_directory_path() / "ave_pose_nan_test";
+  fs::create_directories(dir);
+  const std::string gps_header = "t_ns,valid,x_m,y_m,z_m,cov_xx,cov_xy,cov_xz,cov_yy,cov_yz,cov_zz\n";
+  const std::string imu_header = "t_ns,qw,qx,qy,qz,gyro_x_rad_s,gyro_y_rad_s,gyro_z_rad_s\n";
+  std::ofstream(dir / "gps.csv") << gps_header << "1000,1,1,2,3,1,0,0,1,0,1\n2000,1,1,2,3,inf,0,0,1,0,1\n";
+  std::ofstream(dir / "imu.csv") << imu_header << "1000,1,0,0,0,0,0,0\n";
+  EXPECT_THAT(std::string(ReadSensorLog(dir.string(), {0, 0, 0}).status().message()),
+              HasSubstr("gps.csv:3: column cov_xx: not finite 'inf'"));
+  std::ofstream(dir / "gps.csv") << gps_header << "1000,1,1,2,3,1,0,0,1,0,1\n";
+  std::ofstream(dir / "imu.csv") << imu_header << "1000,nan,0,0,0,0,0,0\n";
+  EXPECT_THAT(std::string(ReadSensorLog(dir.string(), {0, 0, 0}).status().message()),
+              HasSubstr("imu.csv:2: column qw: not finite 'nan'"));
+  std::ofstream(dir / "imu.csv") << imu_header << "1000,1,0,0,0,0,-nan,0\n";
+  EXPECT_THAT(std::string(ReadSensorLog(dir.string(), {0, 0, 0}).status().message()), HasSubstr("imu.csv:2: column gyro_y_rad_s"));
+  std::ofstream(dir / "imu.csv") << imu_header << "1000,1,0,0,0,0,0,0\n";
+  EXPECT_TRUE(ReadSensorLog(dir.string(), {0, 0, 0}).ok());
+  fs::remove_all(dir);
+}
+
 TEST(PoseMode, ParsesTheThreeModes) {
   EXPECT_EQ(ParsePoseMode("truth"), PoseMode::kTruth);
   EXPECT_EQ(ParsePoseMode("gps-imu"), PoseMode::kGpsImu);

@@ -363,6 +363,9 @@ absl::StatusOr<LidarFrame> ReadRotatingLidarFrame(const std::string& path) {
     pt.ring = internal::GetU16(r + 20);
     pt.azimuth_rad = internal::GetF32(r + 22);
     pt.label = internal::GetU32(r + 26);
+    if (!pt.p_local.allFinite() || !std::isfinite(pt.range_m)) {
+      return absl::InvalidArgumentError(path + ": point " + std::to_string(i) + " is not finite");
+    }
   }
   return frame;
 }

@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -339,6 +340,37 @@ TEST(RotatingLidar, WritesNativeFramesTruthAndAPcapThatDecodesBack) {
   int rows = 0;
   while (std::getline(feet, line)) ++rows;
   EXPECT_EQ(rows, 3 * 6);
+  std::filesystem::remove_all(dir);
+}
+
+// Issue 14: the native frame format read back from disk: every way a file can be wrong is refused
+// naming the file.
+TEST(RotatingLidar, BadNativeFramesAreRefusedNamingTheFile) {
+  const std::string dir = TempDir("bad_frames");
+  ASSERT_TRUE(WriteRotatingLidar(testing::CourtyardSite(), SmallSpec(), EffectSet{}, 3, 0.1, dir).ok());
+  const absl::StatusOr<std::string> good = internal::ReadWholeFile(dir + "/frame_000000.bin");
+  ASSERT_TRUE(good.ok()) << good.status();
+  ASSERT_GT(good->size(), 28u + 30u);
+  auto read = [&](const std::string& bytes) {
+    const std::string path = dir + "/edited.bin";
+    std::ofstream(path, std::ios::binary | std::ios::trunc) << bytes;
+    return std::string(ReadRotatingLidarFrame(path).status().message());
+  };
+  const std::string path = dir + "/edited.bin";
+  EXPECT_THAT(read(""), ::testing::HasSubstr(path + ": not an AVELIDR1 frame"));
+  EXPECT_THAT(read("PK\x03\x04" + good->substr(4)), ::testing::HasSubstr(path + ": not an AVELIDR1 frame"));
+  std::string version = *good;
+  version[8] = 2;
+  EXPECT_THAT(read(version), ::testing::HasSubstr(path + ": unsupported version"));
+  EXPECT_THAT(read(good->substr(0, good->size() - 1)), ::testing::HasSubstr(path + ": size does not match the point count"));
+  std::string count = *good;
+  count[20] = count[21] = count[22] = count[23] = '\xff';  // 4 billion points claimed
+  EXPECT_THAT(read(count), ::testing::HasSubstr(path + ": size does not match the point count"));
+  std::string nan = *good;
+  const float bad = NAN;
+  std::memcpy(nan.data() + 28 + 4, &bad, 4);  // the first point's y
+  EXPECT_THAT(read(nan), ::testing::HasSubstr(path + ": point 0 is not finite"));
+  EXPECT_THAT(std::string(ReadRotatingLidarFrame(dir + "/none.bin").status().message()), ::testing::HasSubstr(dir + "/none.bin"));
   std::filesystem::remove_all(dir);
 }
 

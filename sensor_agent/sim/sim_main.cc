@@ -129,9 +129,9 @@ int main(int argc, char** argv) {
   CLI::App* camera = app.add_subcommand("camera", "frames + object-id and class masks + true poses of one camera");
   common(camera);
   camera->add_option("--camera", camera_id, "camera id in the scenario")->required();
-  camera->add_option("--frames", frames, "number of frames")->capture_default_str()->check(CLI::Range(1, 1000000));
-  camera->add_option("--fps", fps, "frames per second (default: the camera's fps)")->check(CLI::Range(0.001, 1000.0));
-  camera->add_option("--start", start_s, "scene time of the first frame (s)")->capture_default_str();
+  camera->add_option("--frames", frames, "number of frames")->capture_default_str()->check(ave::cli::Range(1, 1000000));
+  camera->add_option("--fps", fps, "frames per second (default: the camera's fps)")->check(ave::cli::Range(0.001, 1000.0));
+  camera->add_option("--start", start_s, "scene time of the first frame (s)")->capture_default_str()->check(ave::cli::Range(-1e7, 1e7));
   camera->add_option("--format", format, "frame image format")->capture_default_str()->check(CLI::IsMember({"png", "jpg"}));
   CLI::App* gps = app.add_subcommand("gps-imu", "GPS and IMU streams of a carrier camera with the true trajectory");
   common(gps);
@@ -141,7 +141,7 @@ int main(int argc, char** argv) {
   CLI::App* rotating = app.add_subcommand("rotating-lidar", "rotating multi-beam LiDAR frames, pcap and truth");
   common(rotating);
   rotating->add_option("--lidar", lidar_id, "LiDAR id (default: the scenario's first)");
-  rotating->add_option("--seconds", seconds, "duration (s)")->capture_default_str()->check(CLI::Range(0.0, 3600.0));
+  rotating->add_option("--seconds", seconds, "duration (s)")->capture_default_str()->check(ave::cli::Range(0.0, 3600.0));
   CLI::App* studio = app.add_subcommand("studio", "multi-camera studio images with silhouettes and calibration");
   common(studio);
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-sim")) return *exit_code;

@@ -123,6 +123,10 @@ absl::StatusOr<std::unique_ptr<FrameSource>> OpenSource(const std::string& spec,
   if (!(options.fps > 0 && options.fps <= 1000)) {
     return absl::InvalidArgumentError(absl::StrCat("source '", spec, "': fps must be in (0, 1000]"));
   }
+  if (!(options.default_fov_deg > 0 && options.default_fov_deg < 180)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("source '", spec, "': field of view (--fov) must be in (0, 180) degrees, not ", options.default_fov_deg));
+  }
   if (options.intrinsics.width > 0) {
     if (const std::string why = options.intrinsics.Check(); !why.empty()) {
       return absl::InvalidArgumentError(absl::StrCat("source '", spec, "': intrinsics.", why));
@@ -159,6 +163,9 @@ absl::StatusOr<std::unique_ptr<FrameSource>> OpenSource(const std::string& spec,
   } else if (StartsWith(spec, "v4l2:")) {
     const std::string dev = spec.substr(5);
     const bool numeric = !dev.empty() && dev.find_first_not_of("0123456789") == std::string::npos;
+    if (numeric && dev.size() > 4) {  // std::stoi would throw past INT_MAX; no machine has 10,000 devices
+      return absl::InvalidArgumentError(absl::StrCat("source '", spec, "': device number out of range (0..9999)"));
+    }
     opened = numeric ? capture->open(std::stoi(dev), cv::CAP_V4L2) : capture->open(dev, cv::CAP_V4L2);
   } else {
     return absl::InvalidArgumentError(

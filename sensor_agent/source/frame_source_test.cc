@@ -70,6 +70,22 @@ TEST(OpenSource, BadSpecsNameTheProblem) {
   EXPECT_THAT(std::string(OpenSource("ftp://x", {}).status().message()), HasSubstr("unknown scheme"));
   EXPECT_THAT(std::string(OpenSource("file:/no/such/video.avi", {}).status().message()), HasSubstr("cannot open"));
   EXPECT_THAT(std::string(OpenSource("sim:campus#cam1", {.fps = 0}).status().message()), HasSubstr("fps"));
+  // Issue 14: a device number past INT_MAX threw out of std::stoi (abort); a field of view out of
+  // (0, 180) gave infinite or negative focal lengths.
+  EXPECT_THAT(std::string(OpenSource("v4l2:99999999999999999999", {}).status().message()),
+              HasSubstr("'v4l2:99999999999999999999': device number out of range"));
+  for (double fov : {0.0, 180.0, -5.0, double{NAN}}) {
+    EXPECT_THAT(std::string(OpenSource("sim:campus#cam1", {.default_fov_deg = fov}).status().message()), HasSubstr("--fov"))
+        << fov;
+  }
+  // A file that is not a video: refused at open or ends after 0 frames, naming the source.
+  const std::string junk = (std::filesystem::temp_directory_path() / "ave_source_junk.avi").string();
+  std::ofstream(junk) << "this is not a video\n";
+  auto source = OpenSource("file:" + junk, {});
+  const absl::Status s = source.ok() ? (*source)->Next().status() : source.status();
+  EXPECT_FALSE(s.ok());
+  EXPECT_THAT(std::string(s.message()), HasSubstr(junk));
+  std::filesystem::remove(junk);
 }
 
 TEST(OpenSource, VideoFileIsReadToItsEnd) {

@@ -86,6 +86,10 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
     spill = (std::filesystem::temp_directory_path() / absl::StrCat("ave-agent-", id, "-", ::getpid(), ".meta")).string();
   } else if (spill == "-") {
     spill.clear();
+  } else if (const std::filesystem::path folder = std::filesystem::path(spill).parent_path();
+             !folder.empty() && !std::filesystem::is_directory(folder)) {
+    // Otherwise the first long outage would drop its records silently (counted only).
+    return absl::InvalidArgumentError(absl::StrCat("camera '", id, "': --spill ", spill, ": no folder ", folder.string()));
   }
   MetadataBuffer buffer({.max_in_memory = options_.metadata_in_memory,
                          .spill_path = spill,
@@ -267,7 +271,9 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
         AVE_LOG(ERROR) << "camera '" << id << "': refused by the server: " << status.error_message();
         return absl::Status(static_cast<absl::StatusCode>(status.error_code()), status.error_message());
       }
-      if (source_done) break;
+      // --max-frames / --duration reached while the server is away: stop (the backoff below would
+      // return at once and the loop reconnect without pause, for ever; found for issue 14).
+      if (source_done || limited(Clock::now())) break;
       // Jittered exponential backoff: a random wait in [backoff/2, backoff], then double it. The
       // camera keeps capturing meanwhile; each frame's metadata goes to the buffer.
       std::uniform_int_distribution<int64_t> jitter(backoff.count() / 2, backoff.count());

@@ -46,6 +46,50 @@ TEST(ClockOffsetEstimator, TakesTheSmallestRoundTrip) {
   EXPECT_FALSE(e.Acked(77, 0, 3000));  // unknown sequence
 }
 
+// Issue 14: --duration (or --max-frames) ends the agent even when the server never answers; it
+// used to reconnect in a tight loop for ever once the limit was reached during the outage.
+TEST(AgentLimits, DurationEndsTheRunWhileTheServerIsUnreachable) {
+  AgentOptions options;
+  options.server = "127.0.0.1:1";  // nothing listens: every connect is refused
+  options.camera_id = "cam";
+  options.token = "sensor";
+  options.duration_s = 0.3;
+  options.spill_path = "-";
+  options.backoff_initial = std::chrono::milliseconds(20);
+  options.backoff_max = std::chrono::milliseconds(40);
+  AgentStreamer streamer(options, std::make_unique<FakeSource>());
+  std::atomic<bool> stop{false}, done{false};
+  absl::Status status;
+  std::thread run([&] {
+    status = streamer.Run(stop);
+    done = true;
+  });
+  for (int i = 0; i < 400 && !done; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(50));  // 20 s at most
+  const bool ended_by_itself = done.load();
+  stop = true;
+  run.join();
+  EXPECT_TRUE(ended_by_itself) << "still running 20 s after a 0.3 s --duration; " << streamer.stats().connects
+                               << " connection attempts";
+  EXPECT_TRUE(status.ok()) << status;
+  EXPECT_LT(streamer.stats().connects, 100);
+  EXPECT_GT(streamer.stats().metadata_buffered, 0);
+}
+
+TEST(AgentLimits, SpillFileInAMissingFolderIsRefusedUpFront) {
+  AgentOptions options;
+  options.server = "127.0.0.1:1";
+  options.camera_id = "cam";
+  options.spill_path = "/nonexistent-ave-folder/cam.meta";
+  AgentStreamer streamer(options, std::make_unique<FakeSource>());
+  std::atomic<bool> stop{false};
+  const absl::Status status = streamer.Run(stop);
+  EXPECT_EQ(status.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(std::string(status.message()).find("camera 'cam': --spill /nonexistent-ave-folder/cam.meta: no folder"),
+            std::string::npos)
+      << status;
+  EXPECT_EQ(streamer.stats().connects, 0);
+}
+
 class AgentFaults : public ::testing::Test {
  protected:
   void SetUp() override {

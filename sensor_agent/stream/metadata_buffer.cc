@@ -67,7 +67,7 @@ absl::StatusOr<std::optional<v1::SensorFrame>> MetadataBuffer::Pop() {
   }
   uint32_t n = 0;
   in_.read(reinterpret_cast<char*>(&n), sizeof n);
-  std::string bytes(in_ ? n : 0, '\0');
+  std::string bytes(in_ && n <= (1u << 20) ? n : 0, '\0');  // bound before allocating: n comes from the file
   if (in_ && n <= (1u << 20)) in_.read(bytes.data(), n);
   v1::SensorFrame f;
   if (!in_ || n > (1u << 20) || !f.ParseFromString(bytes)) {

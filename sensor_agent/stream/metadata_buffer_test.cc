@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <filesystem>
+#include <fstream>
 
 #include <gtest/gtest.h>
 
@@ -63,6 +64,32 @@ TEST(MetadataBuffer, IsBoundedAndCountsWhatItDrops) {
   EXPECT_EQ(buffer.size(), 5u);
   EXPECT_EQ(buffer.dropped(), 3u);
   EXPECT_EQ(Drain(buffer), (std::vector<uint64_t>{1, 2, 3, 4, 5}));  // the oldest are kept, in order
+}
+
+// Issue 14: the spill file is read back; a corrupt length (here 4 GiB) is refused naming the file,
+// without allocating it, and what it held is counted as lost.
+TEST(MetadataBuffer, CorruptSpillFileIsDataLossNamingTheFile) {
+  const std::string path =
+      (std::filesystem::temp_directory_path() / ("ave_meta_bad_" + std::to_string(::getpid()))).string();
+  MetadataBuffer buffer({.max_in_memory = 1, .spill_path = path, .max_spilled = 100});
+  for (uint64_t s = 1; s <= 4; ++s) buffer.Push(Record(s));
+  ASSERT_EQ(buffer.spilled(), 3u);
+  {
+    std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
+    const char huge[4] = {'\xff', '\xff', '\xff', '\xff'};
+    f.write(huge, 4);
+  }
+  auto first = buffer.Pop();
+  ASSERT_TRUE(first.ok() && first->has_value());
+  EXPECT_EQ((*first)->sequence(), 1u);  // from memory
+  auto bad = buffer.Pop();
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_NE(std::string(bad.status().message()).find(path), std::string::npos) << bad.status();
+  EXPECT_EQ(buffer.dropped(), 3u);
+  auto after = buffer.Pop();
+  ASSERT_TRUE(after.ok());
+  EXPECT_FALSE(after->has_value());
 }
 
 }  // namespace

@@ -5,6 +5,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include "model_store/common/cli.h"
+
 namespace ave::bench {
 
 using Runner = std::function<int()>;

@@ -601,8 +601,8 @@ Runner AddDetectBench(CLI::App& sub) {
   auto options = std::make_shared<DetectOptions>();
   sub.add_option("--scenario", options->scenario, "bundled scenario or .yaml path")->capture_default_str();
   sub.add_option("--cameras", options->cameras, "comma-separated camera ids")->capture_default_str();
-  sub.add_option("--seconds", options->seconds, "video length per camera")->capture_default_str()->check(CLI::Range(1.0, 3600.0));
-  sub.add_option("--fps", options->fps, "frames per second")->capture_default_str()->check(CLI::Range(1.0, 120.0));
+  sub.add_option("--seconds", options->seconds, "video length per camera")->capture_default_str()->check(ave::cli::Range(1.0, 3600.0));
+  sub.add_option("--fps", options->fps, "frames per second")->capture_default_str()->check(ave::cli::Range(1.0, 120.0));
   sub.add_option("--max-range", options->max_error_range_m, "3D error only for pedestrians within this range (m)")
       ->capture_default_str();
   sub.add_option("--hd-frames", options->hd_frames, "frames per camera timed at 1920x1080")->capture_default_str();
@@ -610,7 +610,7 @@ Runner AddDetectBench(CLI::App& sub) {
   sub.add_option("--min-visibility", options->min_visibility,
                  "visible protocol: truth boxes less visible than this (box area / unoccluded box area) are ignore regions")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 1.0));
+      ->check(ave::cli::Range(0.0, 1.0));
   detect::DetectorOptions& d = options->detector;
   sub.add_option("--window", d.window_s, "background averaging window (s)")->capture_default_str();
   sub.add_option("--top-fraction", d.top_fraction, "histogram threshold: fraction of differences kept")->capture_default_str();

@@ -326,7 +326,7 @@ Runner AddPoseBench(CLI::App& sub) {
   auto o = std::make_shared<PoseBenchOptions>();
   sub.add_option("--scenario", o->scenario, "bundled scenario name or .yaml path")->capture_default_str();
   sub.add_option("--camera", o->camera, "a moving camera of the scenario")->capture_default_str();
-  sub.add_option("--seconds", o->seconds, "scene time simulated")->capture_default_str()->check(CLI::Range(0.5, 600.0));
+  sub.add_option("--seconds", o->seconds, "scene time simulated")->capture_default_str()->check(ave::cli::Range(0.5, 600.0));
   sub.add_option("--features", o->features, "vision features per frame to sweep (0 = GPS+inertial only)")->delimiter(',');
   sub.add_option("--lines", o->lines, "use known 3D line features")->capture_default_str();
   sub.add_option("--new-points", o->new_points, "track and triangulate unknown point features (and add the row where they correct the pose)")

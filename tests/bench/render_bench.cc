@@ -574,20 +574,20 @@ int RunRender(const RenderBenchOptions& o) {
 Runner AddRenderBench(CLI::App& sub) {
   auto o = std::make_shared<RenderBenchOptions>();
   sub.add_option("--scenario", o->scenario, "bundled scenario name or .yaml path");
-  sub.add_option("--width", o->width, "framebuffer width (px)")->check(CLI::Range(64, 8192));
-  sub.add_option("--height", o->height, "framebuffer height (px)")->check(CLI::Range(64, 8192));
-  sub.add_option("--frames", o->frames, "timed frames per row")->check(CLI::Range(1, 1000));
-  sub.add_option("--grid", o->grid_m, "terrain grid of the static mesh (m)")->check(CLI::Range(0.25, 50.0));
+  sub.add_option("--width", o->width, "framebuffer width (px)")->check(ave::cli::Range(64, 8192));
+  sub.add_option("--height", o->height, "framebuffer height (px)")->check(ave::cli::Range(64, 8192));
+  sub.add_option("--frames", o->frames, "timed frames per row")->check(ave::cli::Range(1, 1000));
+  sub.add_option("--grid", o->grid_m, "terrain grid of the static mesh (m)")->check(ave::cli::Range(0.25, 50.0));
   sub.add_option("--counts", o->counts, "camera counts, comma-separated");
   sub.add_option("--shadow-sizes", o->shadow_sizes, "shadow-map sizes, comma-separated");
-  sub.add_option("--shadow-cameras", o->shadow_cameras, "cameras in the shadow-size part")->check(CLI::Range(1, 64));
-  sub.add_option("--truth-stride", o->truth_stride, "ray-cast every n-th pixel")->check(CLI::Range(1, 64));
+  sub.add_option("--shadow-cameras", o->shadow_cameras, "cameras in the shadow-size part")->check(ave::cli::Range(1, 64));
+  sub.add_option("--truth-stride", o->truth_stride, "ray-cast every n-th pixel")->check(ave::cli::Range(1, 64));
   sub.add_option("--plot", o->plot, "PNG plot path");
   sub.add_option("--moving-cameras", o->moving_cameras,
                  "RendererOptions::moving_view_cameras (a moving view seeing more is reduced further)")
-      ->check(CLI::Range(1, 1000));
+      ->check(ave::cli::Range(1, 1000));
   sub.add_option("--moving-scale", o->moving_scale, "RendererOptions::moving_view_scale (1: moving views in full)")
-      ->check(CLI::Range(1.0, 4.0));
+      ->check(ave::cli::Range(1.0, 4.0));
   sub.add_flag("--per-projector", o->per_projector, "one pass per live projector (combined_live_passes off)");
   sub.add_flag("--cache-only", o->cache_only, "only the cache-on rows (no cache-off rows, no exact-vs-cached part)");
   return [o] { return RunRender(*o); };

@@ -199,9 +199,9 @@ int Run(const Options& o) {
 
 Runner AddSelectBench(CLI::App& sub) {
   auto o = std::make_shared<Options>();
-  sub.add_option("--cameras", o->cameras, "cameras registered and streaming")->capture_default_str()->check(CLI::Range(4, 400));
-  sub.add_option("--fps", o->fps, "frames per second per camera")->capture_default_str()->check(CLI::Range(0.5, 60.0));
-  sub.add_option("--seconds", o->seconds, "measured time")->capture_default_str()->check(CLI::Range(1.0, 600.0));
+  sub.add_option("--cameras", o->cameras, "cameras registered and streaming")->capture_default_str()->check(ave::cli::Range(4, 400));
+  sub.add_option("--fps", o->fps, "frames per second per camera")->capture_default_str()->check(ave::cli::Range(0.5, 60.0));
+  sub.add_option("--seconds", o->seconds, "measured time")->capture_default_str()->check(ave::cli::Range(1.0, 600.0));
   sub.add_option("--block-x", o->block_x, "the block looked at, x (m, site frame)")->capture_default_str();
   sub.add_option("--block-y", o->block_y, "the block looked at, y (m)")->capture_default_str();
   sub.add_option("--plot", o->plot, "PNG bar chart")->capture_default_str();

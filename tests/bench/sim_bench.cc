@@ -164,8 +164,8 @@ Runner AddSimBench(CLI::App& sub) {
   auto options = std::make_shared<SimOptions>();
   sub.add_option("--scenario", options->scenario, "bundled scenario or .yaml path")->capture_default_str();
   sub.add_option("--camera", options->camera, "camera id")->capture_default_str();
-  sub.add_option("--seconds", options->seconds, "seconds of video")->capture_default_str()->check(CLI::Range(0.01, 3600.0));
-  sub.add_option("--fps", options->fps, "frames per second")->capture_default_str()->check(CLI::Range(0.1, 240.0));
+  sub.add_option("--seconds", options->seconds, "seconds of video")->capture_default_str()->check(ave::cli::Range(0.01, 3600.0));
+  sub.add_option("--fps", options->fps, "frames per second")->capture_default_str()->check(ave::cli::Range(0.1, 240.0));
   return [options] { return RunSim(*options); };
 }
 

@@ -460,6 +460,14 @@ absl::Status RunViewer(const ViewerOptions& options) {
     std::filesystem::create_directories(options.record_dir, ec);
     if (ec) return absl::UnavailableError("viewer: --record " + options.record_dir + ": " + ec.message());
   }
+  // Output files are written at the end: a missing folder is said now, not after the whole run.
+  for (const auto& [flag, path] : {std::pair<const char*, const std::string&>{"--snapshot", options.snapshot_path},
+                                   {"--depth", options.depth_path}}) {
+    const std::filesystem::path parent = std::filesystem::path(path).parent_path();
+    if (!path.empty() && !parent.empty() && !std::filesystem::is_directory(parent)) {
+      return absl::NotFoundError(absl::StrCat("viewer: ", flag, " ", path, ": no folder ", parent.string()));
+    }
+  }
   std::unique_ptr<GlContext> context;
   WindowContext* window = nullptr;
   if (options.headless) {
