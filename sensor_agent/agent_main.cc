@@ -71,6 +71,7 @@ int RunLidarMode(const std::string& source_spec, bool detect_only, const std::st
     std::cerr << "ave-agent: --detect-only needs --out FILE (or '-')\n";
     return 2;
   }
+  ave::lidar::KeepSweepBuffersInProcess();
   auto source = ave::lidar::OpenLidarSource(source_spec, {.calibration_file = calibration_file});
   if (!source.ok()) {
     std::cerr << "ave-agent: " << source.status().message() << "\n";

@@ -1,6 +1,7 @@
 #include "sensor_agent/lidar/lidar_source.h"
 
 #include <arpa/inet.h>
+#include <malloc.h>
 #include <netinet/in.h>
 #include <poll.h>
 #include <sys/socket.h>
@@ -265,6 +266,11 @@ std::string LidarSourceOptions::Check() const {
   if (!(max_range_m >= 0 && max_range_m <= 1000)) return "max_range_m must be in [0, 1000]";
   if (!(udp_idle_timeout_s > 0 && udp_idle_timeout_s <= 3600)) return "udp_idle_timeout_s must be in (0, 3600]";
   return {};
+}
+
+void KeepSweepBuffersInProcess() {
+  mallopt(M_MMAP_THRESHOLD, 64 << 20);
+  mallopt(M_TRIM_THRESHOLD, 128 << 20);
 }
 
 absl::StatusOr<bool> IsLidarSourceSpec(const std::string& spec) {

@@ -127,40 +127,45 @@ void VelodyneDecoder::Firing(double azimuth_cdeg, int64_t t_ns, std::vector<Lida
   ++firings_in_sweep_;
 }
 
-void VelodyneDecoder::Point(int laser, double azimuth_cdeg, uint16_t raw, uint8_t intensity, uint8_t return_index) {
+void VelodyneDecoder::Point(int laser, const FiringAzimuth& az, uint16_t raw, uint8_t intensity, uint8_t return_index) {
   if (raw == 0) return;  // no return
   const LaserCalibration& cal = calibration_.lasers[laser];
   const double d = raw * calibration_.distance_resolution_m + cal.dist_correction_m;
   if (!(d > 0) || d > max_range_m_) return;
   const LaserTable& t = lasers_[laser];
-  double sa, ca;
-  if (azimuth_cdeg >= 36000) azimuth_cdeg -= 36000;
-  const double whole = std::floor(azimuth_cdeg);
-  if (whole == azimuth_cdeg) {
-    sa = sin_cdeg_[static_cast<int>(whole)];
-    ca = cos_cdeg_[static_cast<int>(whole)];
-  } else {
-    sa = std::sin(azimuth_cdeg * kPi / 18000);
-    ca = std::cos(azimuth_cdeg * kPi / 18000);
-  }
   // a = azimuth - rot_correction
-  const double sin_a = sa * t.cos_rot - ca * t.sin_rot;
-  const double cos_a = ca * t.cos_rot + sa * t.sin_rot;
+  const double sin_a = az.sin * t.cos_rot - az.cos * t.sin_rot;
+  const double cos_a = az.cos * t.cos_rot + az.sin * t.sin_rot;
   const double xy = d * t.cos_vert - cal.vert_offset_m * t.sin_vert;
-  SweepPoint p;
+  SweepPoint& p = sweep_->points.emplace_back();
   p.p_in_sensor = Eigen::Vector3f(static_cast<float>(xy * sin_a - cal.horiz_offset_m * cos_a),
                                   static_cast<float>(xy * cos_a + cal.horiz_offset_m * sin_a),
                                   static_cast<float>(d * t.sin_vert + cal.vert_offset_m * t.cos_vert));
   p.range_m = static_cast<float>(d);
   p.intensity = intensity;
-  double a = azimuth_cdeg * kPi / 18000 - cal.rot_correction_rad;
-  a = std::fmod(a, 2 * kPi);
+  double a = az.rad - cal.rot_correction_rad;  // |rot_correction| <= 2π (Check)
   if (a < 0) a += 2 * kPi;
+  if (a < 0) a += 2 * kPi;
+  if (a >= 2 * kPi) a -= 2 * kPi;
   p.azimuth_rad = static_cast<float>(a);
-  if (p.azimuth_rad >= static_cast<float>(2 * kPi)) p.azimuth_rad = 0;
+  if (!(p.azimuth_rad < static_cast<float>(2 * kPi))) p.azimuth_rad = 0;
   p.ring = t.ring;
   p.return_index = return_index;
-  sweep_->points.push_back(p);
+}
+
+VelodyneDecoder::FiringAzimuth VelodyneDecoder::Azimuth(double azimuth_cdeg) const {
+  if (azimuth_cdeg >= 36000) azimuth_cdeg -= 36000;
+  FiringAzimuth az;
+  az.rad = azimuth_cdeg * (kPi / 18000);
+  const int whole = static_cast<int>(azimuth_cdeg);
+  if (whole == azimuth_cdeg) {
+    az.sin = sin_cdeg_[whole];
+    az.cos = cos_cdeg_[whole];
+  } else {
+    az.sin = std::sin(az.rad);
+    az.cos = std::cos(az.rad);
+  }
+  return az;
 }
 
 absl::Status VelodyneDecoder::Add(const uint8_t* payload, size_t size, int64_t t_ns, std::vector<LidarSweep>& done) {
@@ -220,7 +225,7 @@ absl::Status VelodyneDecoder::Add(const uint8_t* payload, size_t size, int64_t t
   for (int b = 0; b < kBlocks; b += step) {
     // In dual mode block b holds the last return, b + 1 the strongest (or second strongest).
     const uint8_t* blocks[2] = {payload + b * kBlockBytes, dual ? payload + (b + 1) * kBlockBytes : nullptr};
-    auto emit = [&](int laser, int channel, double az) {
+    auto emit = [&](int laser, int channel, const FiringAzimuth& az) {
       const uint16_t d0 = U16(blocks[0] + 4 + 3 * channel);
       const uint8_t i0 = blocks[0][6 + 3 * channel];
       if (!dual) {
@@ -250,14 +255,14 @@ absl::Status VelodyneDecoder::Add(const uint8_t* payload, size_t size, int64_t t
       for (int firing = 0; firing < 2; ++firing) {
         Firing(azimuth[b] + gap * firing * 0.5, t_ns, done);
         for (int ch = 0; ch < 16; ++ch) {
-          const double az = azimuth[b] + gap * (ch * kVlp16ChannelUs + firing * kVlp16SequenceUs) / (2 * kVlp16SequenceUs);
-          emit(ch, firing * 16 + ch, az);
+          emit(ch, firing * 16 + ch, Azimuth(azimuth[b] + gap * (ch * kVlp16ChannelUs + firing * kVlp16SequenceUs) / (2 * kVlp16SequenceUs)));
         }
       }
     } else {
       Firing(azimuth[b], t_ns, done);
       const int first_laser = lower[b] ? 32 : 0;
-      for (int c = 0; c < kChannels; ++c) emit(first_laser + c, c, azimuth[b]);
+      const FiringAzimuth az = Azimuth(azimuth[b]);
+      for (int c = 0; c < kChannels; ++c) emit(first_laser + c, c, az);
     }
   }
   return absl::OkStatus();

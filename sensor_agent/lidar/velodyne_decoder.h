@@ -60,7 +60,11 @@ class VelodyneDecoder {
   absl::Status Configure(const uint8_t* payload);
   void StartSweep(int64_t t_ns);
   void Firing(double azimuth_cdeg, int64_t t_ns, std::vector<LidarSweep>& done);
-  void Point(int laser, double azimuth_cdeg, uint16_t raw, uint8_t intensity, uint8_t return_index);
+  struct FiringAzimuth {
+    double rad = 0, sin = 0, cos = 1;
+  };
+  FiringAzimuth Azimuth(double azimuth_cdeg) const;  // azimuth_cdeg in [0, 72000)
+  void Point(int laser, const FiringAzimuth& az, uint16_t raw, uint8_t intensity, uint8_t return_index);
 
   VelodyneDecoderOptions options_;
   VelodyneModel model_ = VelodyneModel::kUnknown;
