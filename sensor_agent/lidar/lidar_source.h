@@ -3,7 +3,8 @@
 // (sensor_agent/source/frame_source.h):
 //   sim:SCENARIO#LIDAR  a scenario's rotating LiDAR through the simulator (sweeps generated on
 //                       demand, deterministic, paced by the caller; truth attached)
-//   pcap:FILE           a Velodyne capture (HDL-64E, HDL-32E, VLP-16; port 2368 data)
+//   pcap:FILE           a Velodyne capture (HDL-64E, HDL-32E, VLP-16; port 2368 data); its first
+//                       and last sweeps may be partial (a capture starts and stops mid-turn)
 //   udp:PORT, udp:ADDR:PORT  live Velodyne packets on a UDP socket (PORT 0: an ephemeral port)
 #include <cstdint>
 #include <memory>
@@ -29,7 +30,7 @@ class LidarSource {
   virtual std::string description() const = 0;
   // True when the device delivers sweeps at its own rate (udp:); false when the caller paces them.
   virtual bool live() const = 0;
-  // Nominal revolutions per second (the scenario's rate; 10 for a Velodyne until sweeps say otherwise).
+  // Nominal revolutions per second: the scenario's rate; 10 (the Velodyne default) for pcap:/udp:.
   virtual double rate_hz() const = 0;
   // udp: sources: the port the socket is bound to (the ephemeral one for udp:0); 0 otherwise.
   virtual int bound_port() const { return 0; }
