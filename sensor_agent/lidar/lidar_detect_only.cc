@@ -5,6 +5,7 @@
 #include <set>
 
 #include "absl/strings/str_cat.h"
+#include "model_store/common/log.h"
 
 namespace ave::lidar {
 
@@ -39,6 +40,11 @@ absl::StatusOr<LidarDetectOnlySummary> RunLidarDetectOnly(LidarSource& source, c
   while (max_sweeps <= 0 || summary.frames < max_sweeps) {
     absl::StatusOr<LidarSweep> sweep = source.Next();
     if (absl::IsOutOfRange(sweep.status())) break;
+    if (absl::IsDataLoss(sweep.status()) && source.live()) {
+      // A live stream drops the bad datagram and goes on; a file stops at its first bad packet.
+      if (summary.skipped_packets++ < 10) AVE_LOG(WARNING) << sweep.status().message();
+      continue;
+    }
     if (!sweep.ok()) {
       error = absl::Status(sweep.status().code(), absl::StrCat(source.description(), ": after sweep ", summary.frames, ": ",
                                                                sweep.status().message()));

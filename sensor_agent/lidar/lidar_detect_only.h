@@ -20,13 +20,15 @@ struct LidarDetectOnlySummary {
   int64_t frames = 0;
   int64_t distinct_tracks = 0;
   double seconds = 0;  // wall time
+  int64_t skipped_packets = 0;  // live sources: bad datagrams dropped (logged, the first ten)
   std::string ToJson() const;
 };
 
 std::string SweepTracksJson(int64_t frame, int64_t t_ns, const FootTracks& tracks);
 
 // Runs until the source ends (OutOfRange) or max_sweeps (0 = no limit). A source or tracker error
-// ends the run with that error, after every record before it has been written.
+// ends the run with that error, after every record before it has been written; except that a
+// live source's bad datagram (DataLoss) is logged and skipped.
 absl::StatusOr<LidarDetectOnlySummary> RunLidarDetectOnly(LidarSource& source, const SweepTracker& tracker, std::ostream& out,
                                                           int64_t max_sweeps = 0);
 

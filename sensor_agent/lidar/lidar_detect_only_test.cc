@@ -1,6 +1,11 @@
 // The LiDAR --detect-only loop (issue 16) over a real pcap source, with a tracker written here.
 #include "sensor_agent/lidar/lidar_detect_only.h"
 
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
 #include <filesystem>
 #include <sstream>
 
@@ -81,6 +86,31 @@ TEST(LidarDetectOnly, TrackerErrorIsNamed) {
   std::ostringstream out;
   SweepTracker failing = [](const LidarSweep&) -> absl::StatusOr<FootTracks> { return absl::InternalError("boom"); };
   EXPECT_EQ(RunLidarDetectOnly(**source, failing, out).status().message(), "tracker: sweep 0: boom");
+}
+
+TEST(LidarDetectOnly, ALiveSourceSkipsABadDatagramAndGoesOn) {
+  auto source = OpenLidarSource("udp:127.0.0.1:0", {.udp_idle_timeout_s = 30});
+  ASSERT_TRUE(source.ok()) << source.status();
+  const int fd = ::socket(AF_INET, SOCK_DGRAM, 0);
+  sockaddr_in to{};
+  to.sin_family = AF_INET;
+  to.sin_port = htons(static_cast<uint16_t>((*source)->bound_port()));
+  ::inet_pton(AF_INET, "127.0.0.1", &to.sin_addr);
+  std::vector<std::string> datagrams = {std::string(64, '\x7F')};
+  for (int p = 0; p < 4; ++p) {
+    auto blocks = EmptyBlocks((p % 3) * 12000, 1000);
+    for (auto& b : blocks) b.channels[15] = {1500, 9};
+    datagrams.push_back(MakePacket(blocks, 0x37, 0x21));
+  }
+  for (const std::string& d : datagrams) {
+    ASSERT_EQ(::sendto(fd, d.data(), d.size(), 0, reinterpret_cast<sockaddr*>(&to), sizeof(to)), static_cast<ssize_t>(d.size()));
+  }
+  std::ostringstream out;
+  absl::StatusOr<LidarDetectOnlySummary> summary = RunLidarDetectOnly(**source, CountingTracker(), out, 1);
+  ::close(fd);
+  ASSERT_TRUE(summary.ok()) << summary.status();
+  EXPECT_EQ(summary->frames, 1);
+  EXPECT_EQ(summary->skipped_packets, 1);
 }
 
 }  // namespace
