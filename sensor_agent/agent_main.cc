@@ -10,6 +10,8 @@
 #include "model_store/common/cli.h"
 #include "model_store/common/log.h"
 #include "sensor_agent/detect/detect_run.h"
+#include "sensor_agent/lidar/lidar_detect_only.h"
+#include "sensor_agent/lidar/lidar_source.h"
 #include "model_store/scene/intrinsics_file.h"
 #include "sensor_agent/pose/pose_source.h"
 #include "sensor_agent/stream/agent_streamer.h"
@@ -51,6 +53,54 @@ int RunDetectOnly(const std::string& source_spec, const ave::AgentOptions& optio
   return 0;
 }
 
+// ---- LiDAR mode (issue 16): --source pcap:FILE, udp:[ADDR:]PORT or sim:SCENARIO#LIDAR ----
+
+// >>> The one place where ave-agent's SweepTracker is constructed. The LiDAR people tracker
+// (sensor_agent/lidar_track/, issue 16) is wired in here by returning it; until then this returns
+// an empty function and the LiDAR mode says the tracker is not built in (no fake tracks).
+ave::lidar::SweepTracker MakeSweepTracker() { return {}; }
+
+int RunLidarMode(const std::string& source_spec, bool detect_only, const std::string& tracks_out,
+                 const std::string& calibration_file, int64_t max_sweeps) {
+  if (!detect_only) {
+    std::cerr << "ave-agent: " << source_spec
+              << " is a LiDAR source; streaming LiDAR tracks to the server is not built in yet (issue 16): use --detect-only\n";
+    return 2;
+  }
+  if (tracks_out.empty()) {
+    std::cerr << "ave-agent: --detect-only needs --out FILE (or '-')\n";
+    return 2;
+  }
+  ave::lidar::KeepSweepBuffersInProcess();
+  auto source = ave::lidar::OpenLidarSource(source_spec, {.calibration_file = calibration_file});
+  if (!source.ok()) {
+    std::cerr << "ave-agent: " << source.status().message() << "\n";
+    return 1;
+  }
+  const ave::lidar::SweepTracker tracker = MakeSweepTracker();
+  if (!tracker) {
+    std::cerr << "ave-agent: " << (*source)->description()
+              << ": the LiDAR people tracker (sensor_agent/lidar_track) is not built into ave-agent yet\n";
+    return 2;
+  }
+  std::ofstream file;
+  if (tracks_out != "-") {
+    file.open(tracks_out);
+    if (!file) {
+      std::cerr << "ave-agent: cannot write --out " << tracks_out << "\n";
+      return 1;
+    }
+  }
+  std::ostream& out = tracks_out == "-" ? std::cout : file;
+  auto summary = ave::lidar::RunLidarDetectOnly(**source, tracker, out, max_sweeps);
+  if (!summary.ok()) {
+    std::cerr << "ave-agent: " << summary.status().message() << "\n";
+    return 1;
+  }
+  std::cout << summary->ToJson() << std::endl;
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -64,7 +114,11 @@ int main(int argc, char** argv) {
   app.add_option("--server", options.server, "fusion server host:port")->capture_default_str();
   app.add_option("--camera", options.camera_id, "this camera's registered id (required unless --detect-only)");
   app.add_option("--token", options.token, "sensor bearer token (env AVE_SENSOR_TOKEN)");
-  app.add_option("--source", source_spec, "sim:campus#ID, file:PATH, rtsp://..., v4l2:/dev/videoN")->required();
+  app.add_option("--source", source_spec,
+                 "sim:campus#ID, file:PATH, rtsp://..., v4l2:/dev/videoN; LiDAR: pcap:FILE, udp:[ADDR:]PORT, sim:SCENARIO#LIDAR")
+      ->required();
+  std::string lidar_calibration;
+  app.add_option("--calibration", lidar_calibration, "LiDAR sources: Velodyne db.xml or ROS velodyne YAML (default: the model's built-in)");
   app.add_option("--fps", options.fps, "frames per second to send")->capture_default_str()->check(ave::cli::Range(0.1, 240.0));
   app.add_option("--jpeg-quality", options.jpeg_quality, "JPEG quality 1..100")->capture_default_str()->check(ave::cli::Range(1, 100));
   app.add_option("--max-frames", options.max_frames, "stop after N frames (0 = never)")->capture_default_str();
@@ -102,6 +156,9 @@ int main(int argc, char** argv) {
                  "validated meanwhile (default: the validation time, 1 s; 0 = live output)")
       ->check(ave::cli::Range(0.0, 3600.0));
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-agent")) return *exit_code;
+  // A scenario knows whether an id names a camera or a rotating LiDAR; pcap: and udp: are LiDAR.
+  absl::StatusOr<bool> lidar = ave::lidar::IsLidarSourceSpec(source_spec);
+  if (lidar.ok() && *lidar) return RunLidarMode(source_spec, detect_only, tracks_out, lidar_calibration, options.max_frames);
   ave::detect::DetectorOptions detector_options;
   ave::detect::ParseBackgroundKind(background, detector_options.background);
   if (detect_only) {

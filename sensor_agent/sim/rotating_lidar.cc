@@ -78,8 +78,11 @@ double RingElevation(const RotatingLidarSpec& spec, int ring) {
   return (spec.fov_up_deg - ring * (spec.fov_up_deg - spec.fov_down_deg) / (spec.rings - 1)) * kPi / 180;
 }
 
+// `enu_from_sensor` tilts the sensor (rays are cast along enu_from_sensor * d; points stay in the
+// sensor frame); identity for the spec's level sensor.
 LidarFrame SimulateFrame(const scene::SyntheticCampus& campus, const LabelledMesh& static_mesh, const RotatingLidarSpec& spec,
-                         const EffectSet& effects, uint64_t seed, double t_s) {
+                         const EffectSet& effects, uint64_t seed, double t_s,
+                         const Eigen::Matrix3d& enu_from_sensor = Eigen::Matrix3d::Identity()) {
   LidarFrame frame;
   frame.t_ns = static_cast<int64_t>(std::llround(t_s * 1e9));
   const LabelledMesh movers = internal::BuildMoverLidarMesh(campus, t_s);
@@ -101,12 +104,15 @@ LidarFrame SimulateFrame(const scene::SyntheticCampus& campus, const LabelledMes
     const double sa = std::sin(az), ca = std::cos(az);
     for (int r = 0; r < spec.rings; ++r) {
       const Eigen::Vector3d d(cos_el[r] * sa, cos_el[r] * ca, sin_el[r]);
-      const std::optional<LidarHit> hit = internal::CastLidarRay(&static_mesh, &movers, spec.position_m, d, spec.max_range_m);
+      const Eigen::Vector3d d_in_enu = enu_from_sensor * d;
+      const std::optional<LidarHit> hit = internal::CastLidarRay(&static_mesh, &movers, spec.position_m, d_in_enu, spec.max_range_m);
       if (!hit) continue;
-      const double cos_incidence = std::abs(hit->normal.dot(d));
+      const double cos_incidence = std::abs(hit->normal.dot(d_in_enu));
       if (missing && ReturnIsMissing(*missing, rng, cos_incidence)) continue;
       Eigen::Vector3d p_local = d * hit->distance_m;
-      if (waving && hit->label == kLidarVegetationId) p_local += VegetationSway(*waving, campus, spec.position_m + p_local, t_s);
+      if (waving && hit->label == kLidarVegetationId) {
+        p_local += enu_from_sensor.transpose() * VegetationSway(*waving, campus, spec.position_m + enu_from_sensor * p_local, t_s);
+      }
       double range = p_local.norm();
       double intensity = by_material ? IntensityByMaterial(*by_material, *hit, cos_incidence) : 100.0;
       if (ring_pattern) RingPattern(*ring_pattern, seed, r, range, intensity);
@@ -295,6 +301,30 @@ LidarFrame SimulateRotatingLidarFrame(const scene::SyntheticCampus& campus, cons
   const LabelledMesh static_mesh = internal::BuildStaticLidarMesh(campus, internal::kLidarTerrainResolution_m);
   return SimulateFrame(campus, static_mesh, spec, effects, seed, t_s);
 }
+
+struct RotatingLidarSimulator::Impl {
+  const scene::SyntheticCampus& campus;
+  RotatingLidarSpec spec;
+  EffectSet effects;
+  uint64_t seed;
+  Eigen::Matrix3d enu_from_sensor;
+  LabelledMesh static_mesh;
+};
+
+RotatingLidarSimulator::RotatingLidarSimulator(const scene::SyntheticCampus& campus, const RotatingLidarSpec& spec,
+                                               const EffectSet& effects, uint64_t seed, const Eigen::Matrix3d& enu_from_sensor)
+    : impl_(std::make_unique<Impl>(Impl{campus, spec, effects, seed, enu_from_sensor,
+                                        spec.Check().empty() ? internal::BuildStaticLidarMesh(campus, kTerrainResolution_m)
+                                                             : LabelledMesh{}})) {}
+
+RotatingLidarSimulator::~RotatingLidarSimulator() = default;
+
+LidarFrame RotatingLidarSimulator::Frame(double t_s) const {
+  if (!impl_->spec.Check().empty() || !std::isfinite(t_s)) return {};
+  return SimulateFrame(impl_->campus, impl_->static_mesh, impl_->spec, impl_->effects, impl_->seed, t_s, impl_->enu_from_sensor);
+}
+
+const RotatingLidarSpec& RotatingLidarSimulator::spec() const { return impl_->spec; }
 
 absl::Status WriteRotatingLidar(const scene::SyntheticCampus& campus, const RotatingLidarSpec& spec, const EffectSet& effects,
                                 uint64_t seed, double duration_s, const std::string& out_dir) {

@@ -19,6 +19,7 @@
 // points sway with time). Without lidar_missing_returns, every ray that hits within max_range_m
 // returns. Files: docs/SIMULATOR_FORMATS.md.
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
@@ -70,6 +71,23 @@ struct LidarFrame {
 // an empty frame. Builds the static BVH on every call; WriteRotatingLidar builds it once.
 LidarFrame SimulateRotatingLidarFrame(const scene::SyntheticCampus& campus, const RotatingLidarSpec& spec, const EffectSet& effects,
                                       uint64_t seed, double t_s);
+
+// One sensor's frames on demand, the static BVH built once (for sources that generate sweeps as
+// they are asked for). `enu_from_sensor` tilts the sensor (the spec's sensor is level): rays are
+// cast along enu_from_sensor * d, points stay in the (tilted) sensor frame; it must be a rotation.
+// `campus` must outlive the simulator. Frame() of an unusable spec is empty.
+class RotatingLidarSimulator {
+ public:
+  RotatingLidarSimulator(const scene::SyntheticCampus& campus, const RotatingLidarSpec& spec, const EffectSet& effects,
+                         uint64_t seed, const Eigen::Matrix3d& enu_from_sensor = Eigen::Matrix3d::Identity());
+  ~RotatingLidarSimulator();
+  LidarFrame Frame(double t_s) const;
+  const RotatingLidarSpec& spec() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 // floor(duration_s * rate_hz) frames (at least one) into `out_dir`: frame_NNNNNN.bin (native,
 // labelled), frames.csv, pedestrians.csv (truth) and velodyne.pcap (HDL-64E-style packets).

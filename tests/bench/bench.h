@@ -35,6 +35,11 @@ Runner AddSelectBench(CLI::App& sub);
 // frames accumulated, wall/vegetation accuracy, RANSAC and HoughLinesP peers (environment_bench.cc).
 Runner AddEnvironmentBench(CLI::App& sub);
 
+// `ave-bench lidar-decode` (issue 16): Velodyne pcap source sweeps/s, points/s and realtime factor
+// on the simulator's HDL-64E capture, libpcap reading next to our reader, RSS over a long replay
+// (lidar_bench.cc).
+Runner AddLidarDecodeBench(CLI::App& sub);
+
 // Pins the process to one CPU and keeps OpenCV single-threaded, so figures are per core.
 void UseOneCore();
 
