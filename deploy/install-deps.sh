@@ -26,6 +26,8 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev clang-14 libclang-rt-14-dev
   # CPU load beside the repeated end-to-end tests (deploy/test.sh, docs/RELIABILITY.md)
   stress-ng
+  # the libpcap peer of ave-bench lidar-decode (the product reads pcap files itself)
+  libpcap-dev
 )
 
 missing=()

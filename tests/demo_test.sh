@@ -32,12 +32,12 @@ frames=$(sed -n 's/^ave_frames_in_total \([0-9]*\)$/\1/p' "$out/metrics.txt" 2>/
 if pgrep -f "$out/ave.db" >/dev/null; then echo "FAIL: a demo process is still running"; exit 1; fi
 # The window path: the same viewer in a GLFW window under a virtual X display, closing itself after
 # a few frames and writing its last frame.
-if command -v xvfb-run >/dev/null; then
+if command -v Xvfb >/dev/null; then
   AVE_SKIP_DEPS=1 AVE_SKIP_BUILD=1 AVE_BUILD_DIR=$build AVE_DEMO_OUT=$out/window AVE_DEMO_FPS=5 AVE_VIEWER_FRAMES=20 \
-    xvfb-run -a -s "-screen 0 1280x1024x24" bash "$root/deploy/demo.sh"
+    "$root/tests/with_xvfb.sh" bash "$root/deploy/demo.sh"
   test -s "$out/window/quad.png" || { echo "FAIL: the window viewer wrote no quad.png"; exit 1; }
   grep -q "camera 'cam1' connected" "$out/window/server.log" || { echo "FAIL: window run: cam1 never connected"; exit 1; }
 else
-  echo "FAIL: xvfb-run missing (deploy/install-deps.sh installs xvfb)"; exit 1
+  echo "FAIL: Xvfb missing (deploy/install-deps.sh installs xvfb)"; exit 1
 fi
 echo "demo: ok"

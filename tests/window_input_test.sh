@@ -13,7 +13,7 @@ root=$1
 build=$2
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
-for tool in xvfb-run xdotool; do
+for tool in Xvfb xdotool; do
   command -v "$tool" >/dev/null || { echo "FAIL: $tool missing (deploy/install-deps.sh installs it)"; exit 1; }
 done
 
@@ -65,7 +65,7 @@ AVE_SKIP_DEPS=1 AVE_SKIP_BUILD=1 AVE_BUILD_DIR="$build" AVE_DEMO_OUT="$out/windo
   AVE_VIEWER_FRAMES=0 timeout 150 bash "$root/deploy/demo.sh"
 SH
 chmod +x "$out/session.sh"
-xvfb-run -a -s "-screen 0 1280x1024x24" "$out/session.sh" >"$out/demo.log" 2>&1 ||
+"$root/tests/with_xvfb.sh" "$out/session.sh" >"$out/demo.log" 2>&1 ||
   { cat "$out/demo.log"; echo "FAIL: the demo with a window did not end cleanly (Esc not taken?)"; exit 1; }
 grep -q "drive: done" "$out/drive.log" 2>/dev/null || { cat "$out/drive.log" 2>/dev/null; echo "FAIL: input driver did not finish"; exit 1; }
 test -s "$out/first.png" || { echo "FAIL: 'p' wrote no snapshot"; exit 1; }
