@@ -42,9 +42,13 @@ void RangeForeground::Reset(int rings) {
 
 bool RangeForeground::MatchesBackground(int pixel, float range_m) const {
   const Gauss* g = &model_[static_cast<size_t>(pixel) * options_.components];
+  const float seen_m = image_.range_m[pixel];
   for (int k = 0; k < n_background_[pixel]; ++k) {
-    const float tol = std::max(options_.match_sigmas * std::sqrt(g[k].var_m2), options_.bg_tolerance_m);
-    if (std::abs(range_m - g[k].mean_m) < tol) return true;
+    const float sigma = std::sqrt(g[k].var_m2);
+    // The beam of that pixel passed through this surface in this sweep: it is not there now (a
+    // ghost of someone who stood there, leaves swayed aside), so it explains nothing.
+    if (seen_m > g[k].mean_m + options_.match_sigmas * sigma) continue;
+    if (std::abs(range_m - g[k].mean_m) < std::max(options_.match_sigmas * sigma, options_.bg_tolerance_m)) return true;
   }
   return false;
 }

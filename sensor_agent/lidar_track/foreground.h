@@ -56,7 +56,9 @@ struct ForegroundOptions {
   int mrf_iterations = 2;       // ICM sweeps; 0 = the mixture's decision alone
   float mrf_spatial = 0.9f;     // Potts cost per disagreeing 4-neighbour
   float mrf_temporal = 0.9f;    // cost of a label that differs from the previous sweep's
-  float max_background_cost = 12;  // cap of the background data term (outlier ranges)
+  // Cap of the background data term: beyond it a range is "surely not background" whatever its
+  // distance, so that 3-4 background neighbours can outvote a single outlying return.
+  float max_background_cost = 5;
   // 3D point classification.
   bool classify_3d = true;
   float window_m = 0.4f;        // half-width of the neighbourhood, metres at the point's range

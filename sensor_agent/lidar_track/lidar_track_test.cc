@@ -151,6 +151,41 @@ TEST(RangeImage, AzimuthWrapsIntoColumnZero) {
   EXPECT_EQ(AzimuthColumn(std::numeric_limits<float>::quiet_NaN(), 360), 0);
 }
 
+TEST(RangeForeground, MrfRemovesAnIsolatedSpuriousReturnTheMixtureKeeps) {
+  SyntheticSite site;
+  for (const int iterations : {0, 2}) {
+    ForegroundOptions o;
+    o.cols = 360;
+    o.mrf_iterations = iterations;
+    RangeForeground fg(o);
+    for (int f = 0; f < 15; ++f) {
+      ASSERT_TRUE(fg.Segment(testing::MakeSyntheticSweep(site, f / kRate, 3)).ok());
+      fg.Learn({});
+    }
+    lidar::LidarSweep sweep = testing::MakeSyntheticSweep(site, 1.5, 3);
+    size_t spurious = 0;
+    for (size_t i = 0; i < sweep.points.size(); ++i) {
+      if (sweep.points[i].ring == 2 && sweep.points[i].range_m > 20) {
+        spurious = i;
+        break;
+      }
+    }
+    lidar::SweepPoint& p = sweep.points[spurious];
+    p.p_in_sensor *= 8.f / p.range_m;  // a lone return 8 m out in front of the wall
+    p.range_m = 8;
+    absl::StatusOr<std::vector<uint8_t>> labels = fg.Segment(sweep);
+    ASSERT_TRUE(labels.ok()) << labels.status();
+    int n = 0;
+    for (uint8_t v : *labels) n += v;
+    if (iterations == 0) {
+      EXPECT_EQ((*labels)[spurious], 1) << "the mixture alone sees the outlier";
+      EXPECT_EQ(n, 1);
+    } else {
+      EXPECT_EQ(n, 0) << "the MRF's spatial term outvotes a single outlying pixel";
+    }
+  }
+}
+
 TEST(LidarPeopleTracker, SweepWithoutForegroundGivesNoTracks) {
   SyntheticSite site;
   LidarPeopleTracker tracker(SmallOptions());

@@ -33,6 +33,10 @@ Runner AddSelectBench(CLI::App& sub);
 // frames accumulated, wall/vegetation accuracy, RANSAC and HoughLinesP peers (environment_bench.cc).
 Runner AddEnvironmentBench(CLI::App& sub);
 
+// `ave-bench lidar` (issue 16): LiDAR people detection and tracking vs simulator truth, per chain
+// configuration vs ms per sweep, next to OpenCV MOG2 on the range image (lidar_bench.cc).
+Runner AddLidarBench(CLI::App& sub);
+
 // Pins the process to one CPU and keeps OpenCV single-threaded, so figures are per core.
 void UseOneCore();
 
