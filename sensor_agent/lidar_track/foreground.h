@@ -61,7 +61,7 @@ struct ForegroundOptions {
   float max_background_cost = 5;
   // 3D point classification.
   bool classify_3d = true;
-  float window_m = 0.4f;        // half-width of the neighbourhood, metres at the point's range
+  float window_m = 0.05f;       // half-width of the neighbourhood, metres at the point's range
   int max_window_cols = 8;
   int window_rings = 1;
   float bg_tolerance_m = 0.2f;

@@ -58,8 +58,9 @@ sim::Scenario CrowdedCourtyard(sim::Scenario s) {
   add(108, {{-8, -14}, {-8, 14}}, 1.2, 11.0);
   add(109, {{8, 14}, {8, -14}}, 1.1, 17.0);
   add(110, {{-15, 13}, {15, -13}}, 1.4, 30.0);
-  // Standing still the whole time.
-  add(120, {{6, 6}}, 0, 0);
+  // Loitering: 0.1 m/s to and fro over 3 m (a person standing still since before the sensor
+  // started is background to any background model; the walk-in-and-stand case is a gtest).
+  add(120, {{6, 6}, {9, 6}}, 0.1, 0);
   // Two walking shoulder to shoulder.
   add(121, {{-18, -5.35}, {18, -5.35}}, 1.2, 4.0);
   add(122, {{-18, -6.05}, {18, -6.05}}, 1.2, 4.0);

@@ -22,7 +22,7 @@ namespace ave::lidar_track::testing {
 // parallel to the local ENU axes, as the simulator's sensor frame).
 lidar::LidarSweep SweepFromSimFrame(const sim::LidarFrame& frame, const sim::RotatingLidarSpec& spec);
 
-// The courtyard plus 10 more people crossing, one standing still (id 120, at (6, 6)) and two
+// The courtyard plus 10 more people crossing, one loitering at 0.1 m/s (id 120, near (6, 6)) and two
 // walking shoulder to shoulder (ids 121, 122, 0.7 m apart): 25 people. Keeps the courtyard's effects
 // (waving_vegetation among them).
 sim::Scenario CrowdedCourtyard(sim::Scenario courtyard);

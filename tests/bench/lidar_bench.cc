@@ -54,6 +54,7 @@ struct LidarBenchOptions {
   int hdl_sweeps = 30;
   double window_m = lidar_track::ForegroundOptions{}.window_m;
   double bg_tolerance_m = lidar_track::ForegroundOptions{}.bg_tolerance_m;
+  int window_rings = lidar_track::ForegroundOptions{}.window_rings;
   std::string png = "lidar_bench.png";
 };
 
@@ -88,6 +89,7 @@ std::vector<Config> Configs(const LidarBenchOptions& o, int cols) {
   base.foreground.cols = cols;
   base.foreground.window_m = static_cast<float>(o.window_m);
   base.foreground.bg_tolerance_m = static_cast<float>(o.bg_tolerance_m);
+  base.foreground.window_rings = o.window_rings;
   Config mog{"MoG", base};
   mog.options.foreground.mrf_iterations = 0;
   mog.options.foreground.classify_3d = false;
@@ -323,7 +325,7 @@ void WritePng(const ScenarioResult& top, const std::vector<const ScenarioResult*
     for (const Row& row : r->rows) max_ms = std::max(max_ms, row.ms);
   }
   max_ms *= 1.15;
-  const double min_mota = 0.0;
+  const double min_mota = 0.8;  // lower points sit on the axis
   auto pp = [&](double ms, double mota) {
     return cv::Point(x0 + static_cast<int>(ms / max_ms * (x1 - x0)),
                      y1 - static_cast<int>((std::max(mota, min_mota) - min_mota) / (1 - min_mota) * (y1 - y0)));
@@ -331,7 +333,7 @@ void WritePng(const ScenarioResult& top, const std::vector<const ScenarioResult*
   cv::rectangle(img, {x0, y0}, {x1, y1}, cv::Scalar(0, 0, 0));
   for (int k = 0; k <= 5; ++k) {
     const double m = min_mota + k * (1 - min_mota) / 5;
-    cv::putText(img, cv::format("%.1f", m), {x0 - 40, pp(0, m).y + 5}, cv::FONT_HERSHEY_SIMPLEX, 0.45, cv::Scalar(0, 0, 0));
+    cv::putText(img, cv::format("%.2f", m), {x0 - 40, pp(0, m).y + 5}, cv::FONT_HERSHEY_SIMPLEX, 0.45, cv::Scalar(0, 0, 0));
     cv::line(img, {x0, pp(0, m).y}, {x1, pp(0, m).y}, cv::Scalar(230, 230, 230));
     const double ms = max_ms * k / 5;
     cv::putText(img, cv::format("%.1f", ms), {pp(ms, 0).x - 8, y1 + 20}, cv::FONT_HERSHEY_SIMPLEX, 0.45, cv::Scalar(0, 0, 0));
@@ -355,7 +357,7 @@ void WritePng(const ScenarioResult& top, const std::vector<const ScenarioResult*
     }
     cv::putText(img, all[s]->name, {x0 + 10, y0 + 20 + 18 * static_cast<int>(s)}, cv::FONT_HERSHEY_SIMPLEX, 0.5, scen_col[s % 2]);
   }
-  cv::putText(img, "circle: online, square: after bridging; filled: default chain; grey: OpenCV MOG2 peer", {x0 + 10, y0 + 60},
+  cv::putText(img, "circle: online, square: after bridging; filled: default chain; grey: OpenCV MOG2 peer", {x0 + 10, y1 - 12},
               cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(0, 0, 0));
   cv::imwrite(path, img);
 }
@@ -447,6 +449,7 @@ Runner AddLidarBench(CLI::App& sub) {
       ->check(CLI::Range(0, 600));
   sub.add_option("--window-m", options->window_m, "3D point step: neighbourhood half-width (every chain)")->capture_default_str();
   sub.add_option("--bg-tolerance-m", options->bg_tolerance_m, "3D point step: range tolerance (every chain)")->capture_default_str();
+  sub.add_option("--window-rings", options->window_rings, "3D point step: rings above and below (every chain)")->capture_default_str();
   sub.add_option("--png", options->png, "plot to write")->capture_default_str();
   return [options] { return RunLidar(*options); };
 }
