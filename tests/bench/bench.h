@@ -37,8 +37,12 @@ Runner AddEnvironmentBench(CLI::App& sub);
 
 // `ave-bench lidar-decode` (issue 16): Velodyne pcap source sweeps/s, points/s and realtime factor
 // on the simulator's HDL-64E capture, libpcap reading next to our reader, RSS over a long replay
-// (lidar_bench.cc).
+// (lidar_decode_bench.cc).
 Runner AddLidarDecodeBench(CLI::App& sub);
+
+// `ave-bench lidar` (issue 16): LiDAR people detection and tracking vs simulator truth, per chain
+// configuration vs ms per sweep, next to OpenCV MOG2 on the range image (lidar_bench.cc).
+Runner AddLidarBench(CLI::App& sub);
 
 // Pins the process to one CPU and keeps OpenCV single-threaded, so figures are per core.
 void UseOneCore();
