@@ -82,6 +82,8 @@ class LidarService : public ::testing::Test {
   }
   static v1::LidarSweepFrame Sweep(uint64_t sequence, double x) {
     v1::LidarSweepFrame s;
+    s.mutable_foreground()->set_count(1);
+    s.mutable_foreground()->set_packed(std::string("\x64\x00\x00\x00\x00\x00\x01\x00", 8));
     s.set_sequence(sequence);
     s.set_capture_time_ns(1'000'000'000 + static_cast<int64_t>(sequence) * 100'000'000);
     v1::FootTrack* t = s.add_tracks();
@@ -215,6 +217,9 @@ TEST_F(LidarService, ViewerSeesTheLidarAndItsPersonAsAnObject) {
   EXPECT_EQ(update.lidars(0).track_object_ids(0), update.objects(0).object_id());
   EXPECT_EQ(update.objects(0).kind(), 1u);
   EXPECT_NEAR(update.objects(0).position().x(), 3.1, 0.1);
+  // The points, forwarded byte for byte because this viewer asked for them.
+  EXPECT_EQ(update.lidars(0).foreground().count(), 1u);
+  EXPECT_EQ(update.lidars(0).foreground().packed(), Sweep(2, 3.1).foreground().packed());
 }
 
 }  // namespace
