@@ -29,6 +29,7 @@
 #include "sensor_agent/stream/agent_streamer.h"
 #include "sensor_agent/stream/lidar_streamer.h"
 #include "sensor_agent/stream/lidar_test_fixtures.h"
+#include "viewer_client/client/scene_client.h"
 
 namespace ave {
 namespace {
@@ -143,6 +144,10 @@ TEST(LidarEndToEnd, PersonSeenByCameraAndLidarIsOneObjectListingBothNearTheTruth
     lidar_points_sent = stats.points_sent;
   });
 
+  // The viewer's own client library alongside (what ave-viewer draws from).
+  viewer::SceneClient client(channel, kViewer, "lidar-e2e-client");
+  client.Start({.max_rate_hz = 10, .include_jpeg = false, .include_lidar_points = true});
+
   // The viewer: poses, objects and LiDAR points, 10 updates a second.
   auto stub = v1::SceneService::NewStub(channel);
   grpc::ClientContext context;
@@ -196,6 +201,9 @@ TEST(LidarEndToEnd, PersonSeenByCameraAndLidarIsOneObjectListingBothNearTheTruth
   }
   context.TryCancel();
   reader->Finish();
+  const std::vector<viewer::LidarView> client_lidars = client.Lidars();
+  const std::vector<viewer::ObjectView> client_objects = client.Objects();
+  client.Stop();
   stop = true;
   camera_agent.join();
   lidar_agent.join();
@@ -218,6 +226,26 @@ TEST(LidarEndToEnd, PersonSeenByCameraAndLidarIsOneObjectListingBothNearTheTruth
   EXPECT_GE(max_lidar_tracks, 3u);
   EXPECT_GT(lidar_updates_with_points, 0);
   EXPECT_EQ(bad_labels, 0);
+  // The client library holds the LiDAR apart from the cameras, its tracks tied to fused objects,
+  // and the newest sweep's points in the local frame near the people.
+  ASSERT_EQ(client_lidars.size(), 1u);
+  const viewer::LidarView& lidar = client_lidars.front();
+  EXPECT_EQ(lidar.id, spec.id);
+  EXPECT_EQ(lidar.status, viewer::CameraLiveness::kLive);
+  ASSERT_FALSE(lidar.tracks.empty());
+  EXPECT_TRUE(std::any_of(lidar.tracks.begin(), lidar.tracks.end(), [](const auto& t) { return t.object_id != 0; }));
+  ASSERT_NE(lidar.points, nullptr);
+  EXPECT_EQ(lidar.points->bad_labels, 0u);
+  for (size_t k = 0; k < lidar.points->p_local.size(); ++k) {
+    const auto track = std::find_if(lidar.tracks.begin(), lidar.tracks.end(),
+                                    [&](const auto& t) { return t.track_id == lidar.points->track_id[k]; });
+    if (track == lidar.tracks.end() || lidar.points->sweep_sequence != lidar.sweep_sequence) continue;
+    // A person's points lie within a body's reach of its foot point (people are ~0.5 m wide).
+    EXPECT_LT((lidar.points->p_local[k].head<2>().cast<double>() - track->position.head<2>()).norm(), 1.0);
+  }
+  EXPECT_TRUE(std::any_of(client_objects.begin(), client_objects.end(), [&](const viewer::ObjectView& o) {
+    return std::count(o.sensor_ids.begin(), o.sensor_ids.end(), spec.id) > 0 && o.kind == 1;
+  }));
 }
 
 }  // namespace
