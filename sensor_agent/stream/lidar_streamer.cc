@@ -91,15 +91,23 @@ v1::LidarSweepFrame SweepToWire(const lidar::LidarSweep& sweep, const lidar::Foo
   }
   int64_t dropped = 0;
   if (send_points && !label_of.empty() && tracks.point_track_id.size() == sweep.points.size()) {
+    // Over the budget, every stride-th point of a streamed track goes (uniform over the sweep, so
+    // every person keeps points; a cut at max_points would drop whole azimuth ranges).
+    size_t eligible = 0;
+    for (uint32_t id : tracks.point_track_id) eligible += id != 0 && label_of.count(id);
+    const size_t stride = max_points == 0 ? 0 : std::max<size_t>(1, (eligible + max_points - 1) / max_points);
     std::string packed;
+    packed.reserve(8 * std::min<size_t>(eligible, max_points));
     uint32_t count = 0;
+    size_t seen = 0;
     for (size_t i = 0; i < sweep.points.size(); ++i) {
       const uint32_t id = tracks.point_track_id[i];
       if (id == 0) continue;
       auto label = label_of.find(id);
+      const bool take = label != label_of.end() && stride > 0 && seen++ % stride == 0;
       const Eigen::Vector3f& p = sweep.points[i].p_in_sensor;
       const auto x = Centimetres(p.x()), y = Centimetres(p.y()), z = Centimetres(p.z());
-      if (label == label_of.end() || !x || !y || !z || count >= max_points) {
+      if (!take || !x || !y || !z || count >= max_points) {
         ++dropped;
         continue;
       }

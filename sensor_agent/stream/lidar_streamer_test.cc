@@ -86,6 +86,32 @@ TEST(SweepToWire, AppliesWorldFromGroundAndLabelsPointsByStreamedTrack) {
   EXPECT_EQ(SweepToWire(TwoPointSweep(), tracks, true, 0).foreground().count(), 0u);
 }
 
+TEST(SweepToWire, OverTheBudgetPointsAreDecimatedEvenlyNotCut) {
+  lidar::LidarSweep sweep;
+  lidar::FootTracks tracks;
+  for (uint32_t id : {1u, 2u}) {
+    lidar::FootTrack t;
+    t.id = id;
+    t.confirmed = true;
+    tracks.tracks.push_back(t);
+  }
+  // 100 points of person 1, then 100 of person 2 (as a sweep's azimuth order would give them).
+  for (int i = 0; i < 200; ++i) {
+    lidar::SweepPoint p;
+    p.p_in_sensor = Eigen::Vector3f(0.01f * i, 1, 0);
+    sweep.points.push_back(p);
+    tracks.point_track_id.push_back(i < 100 ? 1 : 2);
+  }
+  int64_t dropped = 0;
+  const v1::LidarSweepFrame wire = SweepToWire(sweep, tracks, true, 50, &dropped);
+  ASSERT_EQ(wire.foreground().count(), 50u);
+  EXPECT_EQ(dropped, 150);
+  int per_label[3] = {0, 0, 0};
+  for (int k = 0; k < 50; ++k) ++per_label[PointAt(wire.foreground(), k)[3]];
+  EXPECT_EQ(per_label[1], 25);  // both people keep points
+  EXPECT_EQ(per_label[2], 25);
+}
+
 TEST(SweepToWire, NonFiniteTracksAreLeftOutNotSentToBeRefused) {
   lidar::FootTracks tracks;
   lidar::FootTrack bad;

@@ -33,6 +33,10 @@ Runner AddSelectBench(CLI::App& sub);
 // frames accumulated, wall/vegetation accuracy, RANSAC and HoughLinesP peers (environment_bench.cc).
 Runner AddEnvironmentBench(CLI::App& sub);
 
+// `ave-bench lidar-wire` (issue 16): a rotating LiDAR's stream (tracks, labelled points) in bytes
+// and server time, next to a camera frame of the same scene (lidar_wire_bench.cc).
+Runner AddLidarWireBench(CLI::App& sub);
+
 // Pins the process to one CPU and keeps OpenCV single-threaded, so figures are per core.
 void UseOneCore();
 

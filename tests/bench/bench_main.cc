@@ -19,6 +19,7 @@ int main(int argc, char** argv) {
   runners["model"] = ave::bench::AddModelBench(*app.add_subcommand("model", "static model from LiDAR: terrain/ground/building accuracy vs resolution, filter, time, memory"));
   runners["select"] = ave::bench::AddSelectBench(*app.add_subcommand("select", "data selection: streams and kB/s a viewer receives with its view frusta vs all, server cost"));
   runners["environment"] = ave::bench::AddEnvironmentBench(*app.add_subcommand("environment", "i4D environment from a rotating LiDAR: ms per stage vs frames, wall and vegetation accuracy"));
+  runners["lidar-wire"] = ave::bench::AddLidarWireBench(*app.add_subcommand("lidar-wire", "rotating LiDAR stream: bytes and server us per sweep (tracks, points) next to a camera frame"));
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-bench")) return *exit_code;
   for (auto& [name, run] : runners) {
     if (app.got_subcommand(name)) return run();
