@@ -24,7 +24,15 @@ export AVE_VIEWER_TOKEN=${AVE_VIEWER_TOKEN:-$(token)}
 export AVE_ADMIN_TOKEN=${AVE_ADMIN_TOKEN:-$(token)}
 
 certs=$out/certs
-bash "$root/deploy/make-certs.sh" "$certs" cam1 cam2 cam3 >/dev/null
+# Issue 16: AVE_DEMO_ROTATING_LIDAR=1 adds the campus's rotating LiDAR 'hdl' (a tripod on the lawn
+# south-east of the plaza) as a fourth sensor, streaming foot tracks and labelled points. Off by
+# default until ave-agent has its LiDAR mode (the sweep source of sensor_agent/lidar/ and the people
+# tracker of sensor_agent/lidar_track/ into StreamLidar, sensor_agent/stream/lidar_streamer.h).
+lidar_demo=${AVE_DEMO_ROTATING_LIDAR:-0}
+sensors="cam1 cam2 cam3"
+[ "$lidar_demo" = 1 ] && sensors="$sensors hdl"
+# shellcheck disable=SC2086
+bash "$root/deploy/make-certs.sh" "$certs" $sensors >/dev/null
 export AVE_TLS_CA=$certs/ca.pem  # ave-admin, ave-agent and ave-viewer trust the site CA
 
 pids=()
@@ -73,6 +81,17 @@ for cam in cam1 cam2 cam3; do
   pids+=("$!")
 done
 echo "demo: 3 simulated camera agents streaming, detecting and tracking moving objects"
+if [ "$lidar_demo" = 1 ]; then
+  # Registered like a camera (audited), with its own sensor-bound token. The position is the
+  # scenario's (12, -14) at 2 m above the ground there; the simulated sweeps carry their own pose.
+  "$bin/ave-admin" --server "$server" add-lidar --id hdl --name "Plaza LiDAR" --position 12,-14,2.1 --source "sim:campus#hdl"
+  hdl_token=$("$bin/ave-admin" --server "$server" issue-token --role sensor --camera hdl --label "demo hdl" 2>/dev/null)
+  "$bin/ave-agent" --server "$server" --camera hdl --source "sim:campus#hdl" \
+    --token "$hdl_token" --tls-cert "$certs/sensor-hdl.pem" --tls-key "$certs/sensor-hdl.key" \
+    >"$out/agent-hdl.out" 2>"$out/agent-hdl.log" &
+  pids+=("$!")
+  echo "demo: the rotating LiDAR agent (hdl) streaming foot tracks and points"
+fi
 
 if [ -n "${DISPLAY:-}" ] && [ "${AVE_DEMO_HEADLESS:-0}" != 1 ]; then
   echo "demo: opening the viewer window (close it to stop)"

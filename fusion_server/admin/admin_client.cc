@@ -80,4 +80,16 @@ v1::Camera CampusCameraRecord(const scene::CameraSpec& spec) {
   return camera;
 }
 
+v1::Camera LidarRecord(const std::string& id, const std::string& name, const Rigid3d& world_from_sensor,
+                       const std::string& source_url) {
+  v1::Camera lidar;
+  lidar.set_id(id);
+  lidar.set_name(name.empty() ? id : name);
+  lidar.set_kind(v1::SENSOR_KIND_ROTATING_LIDAR);
+  *lidar.mutable_mounting_pose() = ToProto(world_from_sensor);
+  lidar.set_source_url(source_url);
+  lidar.set_enabled(true);
+  return lidar;
+}
+
 }  // namespace ave

@@ -39,6 +39,11 @@ class AdminClient {
 // The wire record of one of the built-in campus cameras, with source "sim:campus#<id>".
 v1::Camera CampusCameraRecord(const scene::CameraSpec& spec);
 
+// The wire record of a fixed rotating LiDAR (issue 16): kind SENSOR_KIND_ROTATING_LIDAR, no
+// intrinsics, mounting_pose = world_from_sensor (rotating_lidar.h's sensor frame).
+v1::Camera LidarRecord(const std::string& id, const std::string& name, const Rigid3d& world_from_sensor,
+                       const std::string& source_url = {});
+
 absl::Status FromGrpc(const grpc::Status& status);
 
 }  // namespace ave

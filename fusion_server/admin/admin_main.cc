@@ -2,11 +2,14 @@
 //   ave-admin list
 //   ave-admin add-camera --id cam9 --name "Gate" --size 1280x720 --fov 70 --position 10,20,15 --look-at 30,40,0
 //   ave-admin update-camera ... (same flags; every field is replaced)
-//   ave-admin remove-camera --id cam9
+//   ave-admin add-lidar --id hdl64 --position -2,-3,2.1 [--quaternion w,x,y,z | --yaw-deg 0]
+//   ave-admin update-lidar ... (same flags)
+//   ave-admin remove-camera --id cam9  (LiDARs too)
 //   ave-admin import-campus            (registers the built-in campus cameras, skipping existing ones)
 //   ave-admin issue-token --role sensor --camera cam1   (prints the new token once)
 //   ave-admin revoke-token --id 3f2a9c01b7e4 | list-tokens
 // TLS: --tls-ca ca.pem (and --tls-cert/--tls-key for mutual TLS); env AVE_TLS_CA.
+#include <cmath>
 #include <cstdlib>
 #include <iostream>
 #include <sstream>
@@ -80,7 +83,23 @@ int main(int argc, char** argv) {
   add_camera_flags(add);
   CLI::App* update = app.add_subcommand("update-camera", "replace a camera's record");
   add_camera_flags(update);
-  CLI::App* remove = app.add_subcommand("remove-camera", "remove a camera");
+  // Rotating LiDARs (issue 16): registered like cameras, with a kind and no intrinsics. The
+  // rotation is world_from_sensor (default identity: sensor axes along east, north, up).
+  double yaw_deg = 0;
+  auto add_lidar_flags = [&](CLI::App* sub) {
+    sub->add_option("--id", id, "sensor id ([A-Za-z0-9_.-], 1..64)")->required();
+    sub->add_option("--name", name, "display name");
+    sub->add_option("--position", position, "sensor origin x,y,z in the site's local frame (m)")->required();
+    sub->add_option("--quaternion", quaternion, "world_from_sensor rotation w,x,y,z");
+    sub->add_option("--yaw-deg", yaw_deg, "or a rotation about the vertical, degrees counter-clockwise from east");
+    sub->add_option("--source", source, "source (pcap:..., udp:..., sim:courtyard#hdl64)");
+    sub->add_flag("--disabled", disabled, "register disabled");
+  };
+  CLI::App* add_lidar = app.add_subcommand("add-lidar", "register a fixed rotating LiDAR");
+  add_lidar_flags(add_lidar);
+  CLI::App* update_lidar = app.add_subcommand("update-lidar", "replace a rotating LiDAR's record");
+  add_lidar_flags(update_lidar);
+  CLI::App* remove = app.add_subcommand("remove-camera", "remove a camera or LiDAR");
   remove->add_option("--id", id, "camera id")->required();
   app.add_subcommand("import-campus", "register the built-in campus cameras (existing ids are skipped)");
   std::string role, label, token_id;
@@ -140,6 +159,28 @@ int main(int argc, char** argv) {
       ++added;
     }
     std::cout << "campus cameras: " << added << " added, " << existing->size() << " already registered\n";
+    return 0;
+  }
+  if (app.got_subcommand("add-lidar") || app.got_subcommand("update-lidar")) {
+    Eigen::Vector3d origin;
+    if (!ave::cli::ParseVec3(position, origin)) return Fail("--position must be x,y,z, got '" + position + "'");
+    ave::Rigid3d world_from_sensor;
+    world_from_sensor.translation = origin;
+    if (!quaternion.empty()) {
+      std::stringstream qs(quaternion);
+      double w, qx, qy, qz;
+      char c1, c2, c3;
+      if (!(qs >> w >> c1 >> qx >> c2 >> qy >> c3 >> qz)) return Fail("--quaternion must be w,x,y,z");
+      world_from_sensor.rotation = Eigen::Quaterniond(w, qx, qy, qz);  // the server checks it is unit
+    } else {
+      world_from_sensor.rotation = Eigen::Quaterniond(Eigen::AngleAxisd(yaw_deg * M_PI / 180, Eigen::Vector3d::UnitZ()));
+    }
+    ave::v1::Camera lidar = ave::LidarRecord(id, name, world_from_sensor, source);
+    lidar.set_enabled(!disabled);
+    const bool adding = app.got_subcommand("add-lidar");
+    auto result = adding ? client.AddCamera(lidar) : client.UpdateCamera(lidar);
+    if (!result.ok()) return Fail(std::string(result.status().message()));
+    std::cout << (adding ? "added lidar " : "updated lidar ") << id << "\n";
     return 0;
   }
   // add-camera / update-camera

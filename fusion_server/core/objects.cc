@@ -49,9 +49,17 @@ void ObjectFusion::Update(FusedObject& o, const ObjectObservation& obs) {
     o.covariance_xy.diagonal() = o.covariance_xy.diagonal().cwiseMax(1e-4);
   }
   o.position.z() = z.position.z();
-  o.size_m = o.size_m.isZero() ? z.size_m : (0.8 * o.size_m + 0.2 * z.size_m).eval();
+  if (obs.size_measured) {
+    o.size_m = o.size_m.isZero() || !o.size_measured ? z.size_m : (0.8 * o.size_m + 0.2 * z.size_m).eval();
+    o.size_measured = true;
+  } else if (o.size_m.isZero()) {
+    o.size_m = z.size_m;
+  }
   ++o.kind_votes[static_cast<int>(z.kind)];
-  const int best = static_cast<int>(std::max_element(o.kind_votes, o.kind_votes + 3) - o.kind_votes);
+  // A known kind wins a tie with "unknown" (a LiDAR's person track against a camera's box too
+  // small or cut to say what it is); between known kinds the first, as before.
+  int best = static_cast<int>(std::max_element(o.kind_votes + 1, o.kind_votes + 3) - o.kind_votes);
+  if (o.kind_votes[0] > o.kind_votes[best]) best = 0;
   o.kind = static_cast<ObjectKind>(best);
   o.shape = o.kind == ObjectKind::kCar ? ObjectShape::kCuboid : ObjectShape::kBillboard;
   if (o.kind == ObjectKind::kCar && o.size_m.y() < o.size_m.x()) std::swap(o.size_m.x(), o.size_m.y());
@@ -117,6 +125,7 @@ uint64_t ObjectFusion::Observe(const ObjectObservation& obs) {
   o.position = z.position;
   o.covariance_xy = z.covariance_xy;
   o.size_m = z.size_m;
+  o.size_measured = obs.size_measured;
   o.kind = z.kind;
   o.shape = z.shape;
   o.first_seen_ns = o.last_seen_ns = obs.t_ns;
@@ -179,6 +188,7 @@ void ObjectFusion::Expire(int64_t now_ns) {
       keep.covariance_xy = 0.5 * (keep.covariance_xy + keep.covariance_xy.transpose()).eval();
       keep.covariance_xy.diagonal() = keep.covariance_xy.diagonal().cwiseMax(1e-4);
     }
+    if (!keep.size_measured && gone.size_measured) keep.size_m = gone.size_m, keep.size_measured = true;
     for (const auto& c : gone.cameras) {
       keep.cameras.insert(c);
       Retie(c.first, gone.id, keep.id);
@@ -189,6 +199,11 @@ void ObjectFusion::Expire(int64_t now_ns) {
     }
     objects_.erase(b);
   }
+}
+
+uint64_t ObjectFusion::TiedObject(const std::string& camera_id, uint64_t session, uint32_t track_id) const {
+  auto it = ties_.find(TrackKey{camera_id, session, track_id});
+  return it == ties_.end() || !objects_.count(it->second) ? 0 : it->second;
 }
 
 std::vector<const FusedObject*> ObjectFusion::Live(int64_t now_ns) const {

@@ -1,6 +1,8 @@
 #pragma once
 // The server's moving objects (seed AVE §6.1, issue 6): ground-contact placements from every
-// camera fused into objects with one stable id each. Pure (no gRPC, no locking: SceneState holds
+// camera, and foot tracks from every rotating LiDAR (i4D §3.2, issue 16: already ground positions
+// with a covariance, no ray cast), fused into objects with one stable id each. A "camera" below is
+// any sensor. Pure (no gRPC, no locking: SceneState holds
 // it under its mutex).
 //
 // Association: a (camera, stream session, track id) triple once tied to an object stays tied
@@ -39,11 +41,15 @@ struct ObjectOptions {
 };
 
 struct ObjectObservation {
-  std::string camera_id;
+  std::string camera_id;  // the sensor: a camera, or a rotating LiDAR (issue 16)
   uint32_t track_id = 0;
   int64_t t_ns = 0;  // server clock
   Placement placement;
   uint64_t session = 0;  // the camera's stream session (SceneState::StreamOpened); 0 = unknown
+  // False for a LiDAR foot track (a ground position with covariance, no extent): its
+  // placement.size_m is a stand-in that gives a LiDAR-only object a person's size and is replaced
+  // by the first measured size (a camera's box) rather than blended into it.
+  bool size_measured = true;
 };
 
 struct FusedObject {
@@ -60,6 +66,7 @@ struct FusedObject {
   int64_t first_seen_ns = 0, last_seen_ns = 0;
   Eigen::Vector3d heading_anchor = Eigen::Vector3d::Zero();
   int kind_votes[3] = {0, 0, 0};
+  bool size_measured = false;  // some observation measured size_m (else it is a LiDAR stand-in)
 };
 
 class ObjectFusion {
@@ -75,6 +82,9 @@ class ObjectFusion {
   // Objects seen within forget_s of now_ns.
   std::vector<const FusedObject*> Live(int64_t now_ns) const;
   size_t size() const { return objects_.size(); }
+  // The live object a sensor's track (of a stream session) is tied to now, 0 when none (merges
+  // re-point ties, so this follows an object that was merged into another).
+  uint64_t TiedObject(const std::string& camera_id, uint64_t session, uint32_t track_id) const;
 
  private:
   void Update(FusedObject& object, const ObjectObservation& observation);

@@ -52,6 +52,16 @@ uint64_t SceneState::StreamOpened(const std::string& id, const PinholeIntrinsics
   return session;
 }
 
+uint64_t SceneState::StreamOpened(const std::string& id) {
+  std::lock_guard lock(mu_);
+  const uint64_t session = ++sessions_;
+  auto it = cameras_.find(id);
+  if (it == cameras_.end()) return session;
+  ++it->second.open_streams;
+  BumpLocked();
+  return session;
+}
+
 void SceneState::StreamClosed(const std::string& id) {
   std::lock_guard lock(mu_);
   auto it = cameras_.find(id);
@@ -122,6 +132,9 @@ absl::Status SceneState::AcceptFrame(const std::string& id, std::shared_ptr<cons
   std::lock_guard lock(mu_);
   auto it = cameras_.find(id);
   if (it == cameras_.end()) return absl::NotFoundError(absl::StrCat("camera '", id, "' is not registered"));
+  if (it->second.entry.kind != SensorKind::kCamera) {
+    return absl::FailedPreconditionError(absl::StrCat("sensor '", id, "' is registered as a rotating LiDAR, not a camera"));
+  }
   if (frame->metadata_only()) {
     ++it->second.metadata;
     return absl::OkStatus();
@@ -130,12 +143,92 @@ absl::Status SceneState::AcceptFrame(const std::string& id, std::shared_ptr<cons
   it->second.latest = std::move(frame);
   it->second.latest_received_ns = received_ns;
   for (const ObjectObservation& observation : placed) objects_.Observe(observation);
+  if (terrain) ExpireObjectsLocked(t_ns);
+  BumpLocked();
+  return absl::OkStatus();
+}
+
+void SceneState::ExpireObjectsLocked(int64_t t_ns) {
   // Expiry and merging look at every object: at most ten times a second of object time.
   constexpr int64_t kExpireEveryNs = 100'000'000;
-  if (terrain && (t_ns - objects_expired_ns_ >= kExpireEveryNs || t_ns < objects_expired_ns_ - 10 * kExpireEveryNs)) {
+  if (t_ns - objects_expired_ns_ >= kExpireEveryNs || t_ns < objects_expired_ns_ - 10 * kExpireEveryNs) {
     objects_.Expire(t_ns);
     objects_expired_ns_ = t_ns;
   }
+}
+
+namespace {
+
+// A LiDAR foot track as an object observation (issue 16): the track's ground position and
+// covariance as they came, the height from the terrain below when the server has one.
+ObjectObservation LidarObservation(const TerrainModel* terrain, const v1::FootTrack& track, const std::string& id,
+                                   uint64_t session, int64_t t_ns, const Eigen::Vector3d& sensor_in_world) {
+  ObjectObservation obs;
+  obs.camera_id = id;
+  obs.track_id = track.track_id();
+  obs.t_ns = t_ns;
+  obs.session = session;
+  obs.size_measured = false;
+  Placement& z = obs.placement;
+  z.position = Eigen::Vector3d(track.position().x(), track.position().y(), track.position().z());
+  if (terrain) {
+    constexpr double kAboveM = 50;
+    if (auto hit = terrain->Raycast(z.position + Eigen::Vector3d(0, 0, kAboveM), -Eigen::Vector3d::UnitZ(), 2 * kAboveM)) {
+      z.position.z() = hit->point.z();
+    }
+  }
+  z.covariance_xy << track.covariance(0), track.covariance(1), track.covariance(1), track.covariance(2);
+  z.covariance_xy.diagonal() = z.covariance_xy.diagonal().cwiseMax(1e-4);  // validated PSD; floored like placements
+  z.size_m = Eigen::Vector3d(kLidarPersonSizeM[0], kLidarPersonSizeM[1], kLidarPersonSizeM[2]);
+  z.range_m = (z.position - sensor_in_world).head<2>().norm();
+  z.kind = ObjectKind::kPerson;
+  z.shape = ObjectShape::kBillboard;
+  return obs;
+}
+
+int64_t SweepTimeNs(const v1::LidarSweepFrame& sweep, int64_t received_ns) {
+  if (sweep.clock_offset_ns() == 0) return received_ns;
+  return std::min(sweep.capture_time_ns() + sweep.clock_offset_ns(), received_ns);
+}
+
+}  // namespace
+
+absl::Status SceneState::AcceptLidarSweep(const std::string& id, std::shared_ptr<const v1::LidarSweepFrame> sweep,
+                                          int64_t received_ns, uint64_t session) {
+  const int64_t t_ns = SweepTimeNs(*sweep, received_ns);
+  std::shared_ptr<const TerrainModel> terrain;
+  Rigid3d world_from_sensor;
+  const auto check = [&](const Live* live) -> absl::Status {
+    if (!live) return absl::NotFoundError(absl::StrCat("lidar '", id, "' is not registered"));
+    if (live->entry.kind != SensorKind::kRotatingLidar) {
+      return absl::FailedPreconditionError(absl::StrCat("sensor '", id, "' is registered as a camera, not a rotating LiDAR"));
+    }
+    return absl::OkStatus();
+  };
+  {
+    std::lock_guard lock(mu_);
+    auto it = cameras_.find(id);
+    if (absl::Status s = check(it == cameras_.end() ? nullptr : &it->second); !s.ok()) return s;
+    terrain = terrain_;
+    world_from_sensor = it->second.entry.mounting_pose;
+  }
+  if (sweep->has_world_from_sensor()) world_from_sensor = FromProto(sweep->world_from_sensor());
+  // Terrain heights on the caller's thread, before the lock (the terrain is immutable).
+  std::vector<ObjectObservation> observations;
+  observations.reserve(sweep->tracks_size());
+  for (const v1::FootTrack& track : sweep->tracks()) {
+    observations.push_back(LidarObservation(terrain.get(), track, id, session, t_ns, world_from_sensor.translation));
+  }
+  std::lock_guard lock(mu_);
+  auto it = cameras_.find(id);
+  if (absl::Status s = check(it == cameras_.end() ? nullptr : &it->second); !s.ok()) return s;
+  Live& live = it->second;
+  ++live.accepted;
+  live.latest_sweep = std::move(sweep);
+  live.latest_received_ns = received_ns;
+  live.sweep_session = session;
+  for (const ObjectObservation& observation : observations) objects_.Observe(observation);
+  ExpireObjectsLocked(t_ns);
   BumpLocked();
   return absl::OkStatus();
 }
@@ -214,6 +307,12 @@ void SceneState::BuildUpdate(const std::vector<std::string>& camera_ids, bool in
     bool jpeg;
   };
   std::vector<Copy> copies;
+  struct LidarCopy {
+    v1::LidarState* lidar;
+    std::shared_ptr<const v1::LidarSweepFrame> sweep;
+    bool points;
+  };
+  std::vector<LidarCopy> lidar_copies;
   std::unique_lock lock(mu_);
   update.set_server_time_ns(now_ns);
   cursor.last_sent.clear();
@@ -226,6 +325,29 @@ void SceneState::BuildUpdate(const std::vector<std::string>& camera_ids, bool in
   for (const auto& [id, live] : cameras_) {
     if (!live.entry.enabled || !wanted(id)) continue;
     present.insert(id);
+    if (live.entry.kind == SensorKind::kRotatingLidar) {
+      v1::LidarState* lidar = update.add_lidars();
+      lidar->set_sensor_id(id);
+      lidar->set_name(live.entry.name);
+      *lidar->mutable_pose() = live.latest_sweep && live.latest_sweep->has_world_from_sensor()
+                                   ? live.latest_sweep->world_from_sensor()
+                                   : ToProto(live.entry.mounting_pose);
+      lidar->set_status(StatusLocked(live, now_ns));
+      if (!live.latest_sweep) continue;
+      const v1::LidarSweepFrame& sweep = *live.latest_sweep;
+      lidar->set_sweep_capture_time_ns(sweep.capture_time_ns());
+      lidar->set_sweep_capture_server_time_ns(sweep.capture_time_ns() + sweep.clock_offset_ns());
+      lidar->set_sweep_sequence(sweep.sequence());
+      for (const v1::FootTrack& track : sweep.tracks()) {
+        lidar->add_track_object_ids(objects_.TiedObject(id, live.sweep_session, track.track_id()));
+      }
+      uint64_t& sent = cursor.sent_sequence[id];
+      const bool send_points =
+          cursor.include_lidar_points && sweep.sequence() != sent && sweep.foreground().count() > 0;
+      if (send_points) sent = sweep.sequence();
+      lidar_copies.push_back({lidar, live.latest_sweep, send_points});
+      continue;
+    }
     v1::CameraState* cam = update.add_cameras();
     cam->set_camera_id(id);
     cam->set_name(live.entry.name);
@@ -238,16 +360,7 @@ void SceneState::BuildUpdate(const std::vector<std::string>& camera_ids, bool in
     *cam->mutable_pose() = std::move(pose);
     cam->set_near_m(static_cast<float>(options_.near_m));
     cam->set_far_m(static_cast<float>(options_.far_m));
-    const int64_t age_ns = live.latest ? now_ns - live.latest_received_ns : INT64_MAX;
-    const int64_t live_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(options_.live_window).count();
-    const int64_t stale_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(options_.stale_window).count();
-    if (live.latest && age_ns <= live_ns) {
-      cam->set_status(v1::CAMERA_STATUS_LIVE);
-    } else if (live.open_streams > 0 || age_ns <= stale_ns) {
-      cam->set_status(v1::CAMERA_STATUS_STALE);
-    } else {
-      cam->set_status(v1::CAMERA_STATUS_LOST);
-    }
+    cam->set_status(StatusLocked(live, now_ns));
     const bool in_view =
         cursor.views.empty() ||
         AnyIntersects(CameraVolume(k, FromProto(cam->pose()), options_.near_m, options_.far_m, cursor.selection_floor_z),
@@ -315,6 +428,20 @@ void SceneState::BuildUpdate(const std::vector<std::string>& camera_ids, bool in
     *c.cam->mutable_boxes() = c.frame->boxes();
     if (c.jpeg) c.cam->set_jpeg(c.frame->jpeg());
   }
+  for (const LidarCopy& c : lidar_copies) {
+    *c.lidar->mutable_tracks() = c.sweep->tracks();
+    if (c.points) *c.lidar->mutable_foreground() = c.sweep->foreground();
+  }
+}
+
+v1::CameraStatus SceneState::StatusLocked(const Live& live, int64_t now_ns) const {
+  const bool any = live.latest || live.latest_sweep;
+  const int64_t age_ns = any ? now_ns - live.latest_received_ns : INT64_MAX;
+  const int64_t live_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(options_.live_window).count();
+  const int64_t stale_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(options_.stale_window).count();
+  if (any && age_ns <= live_ns) return v1::CAMERA_STATUS_LIVE;
+  if (live.open_streams > 0 || age_ns <= stale_ns) return v1::CAMERA_STATUS_STALE;
+  return v1::CAMERA_STATUS_LOST;
 }
 
 }  // namespace ave

@@ -26,6 +26,11 @@
 
 namespace ave {
 
+// What a registered sensor is (wire: ave.v1.SensorKind).
+enum class SensorKind : uint8_t { kCamera = 0, kRotatingLidar = 1 };
+
+// A registered sensor. A rotating LiDAR (issue 16) has no intrinsics; its mounting_pose is
+// world_from_sensor.
 struct CameraEntry {
   std::string id;
   std::string name;
@@ -33,7 +38,12 @@ struct CameraEntry {
   Rigid3d mounting_pose;  // world_from_camera, local frame
   std::string source_url;
   bool enabled = true;
+  SensorKind kind = SensorKind::kCamera;
 };
+
+// LiDAR foot tracks (issue 16) fuse as persons of this size (width, length, height; metres) until
+// a camera measures one: a track is a ground position only.
+inline constexpr double kLidarPersonSizeM[3] = {0.6, 0.6, 1.75};
 
 struct SceneStateOptions {
   double near_m = 0.5;                          // GL projection near plane handed to viewers
@@ -60,6 +70,9 @@ struct ViewerCursor {
   std::vector<ConvexVolume> views;
   double selection_floor_z = -std::numeric_limits<double>::infinity();
   size_t last_selected = 0;
+  // Rotating LiDARs (issue 16): send each sweep's foreground points (once, like JPEGs: the
+  // sequence sent goes to sent_sequence under the LiDAR's id).
+  bool include_lidar_points = false;
 };
 
 class SceneState {
@@ -74,6 +87,8 @@ class SceneState {
   // A sensor stream opened (with the intrinsics it announced) or closed. StreamOpened returns the
   // stream's session number (unique in this server's life, > 0) to pass to AcceptFrame.
   uint64_t StreamOpened(const std::string& id, const PinholeIntrinsics& intrinsics);
+  // A sensor without intrinsics (a rotating LiDAR) opened a stream.
+  uint64_t StreamOpened(const std::string& id);
   void StreamClosed(const std::string& id);
 
   // Keeps `frame` as the camera's latest. NotFound when the camera is not (or no longer) registered.
@@ -84,7 +99,15 @@ class SceneState {
   absl::Status AcceptFrame(const std::string& id, std::shared_ptr<const v1::SensorFrame> frame, int64_t received_ns,
                            uint64_t session = 0);
 
-  // Frames with a JPEG accepted for a camera since it was registered (0 for an unknown camera).
+  // Keeps a rotating LiDAR's sweep (issue 16) as its latest and fuses its foot tracks into the
+  // objects (ground positions with covariance; heights from the static model's terrain when there
+  // is one, else the track's own z). NotFound when the sensor is not registered, FailedPrecondition
+  // when it is registered as a camera. Object time as for AcceptFrame.
+  absl::Status AcceptLidarSweep(const std::string& id, std::shared_ptr<const v1::LidarSweepFrame> sweep,
+                                int64_t received_ns, uint64_t session = 0);
+
+  // Frames with a JPEG accepted for a camera since it was registered (0 for an unknown camera);
+  // for a LiDAR, sweeps accepted.
   uint64_t AcceptedCount(const std::string& id) const;
   uint64_t MetadataCount(const std::string& id) const;
   int OpenStreams(const std::string& id) const;
@@ -127,8 +150,14 @@ class SceneState {
     int64_t latest_received_ns = 0;
     uint64_t accepted = 0;
     uint64_t metadata = 0;
+    // Rotating LiDARs: the newest sweep and its stream session (its tracks' ties to objects).
+    std::shared_ptr<const v1::LidarSweepFrame> latest_sweep;
+    uint64_t sweep_session = 0;
   };
   void BumpLocked();
+  // ObjectFusion::Expire at most ten times a second of object time.
+  void ExpireObjectsLocked(int64_t t_ns);
+  v1::CameraStatus StatusLocked(const Live& live, int64_t now_ns) const;
 
   SceneStateOptions options_;
   mutable std::mutex mu_;

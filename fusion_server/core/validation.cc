@@ -1,6 +1,8 @@
 #include "fusion_server/core/validation.h"
 
+#include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "fusion_server/core/convert.h"
@@ -87,6 +89,17 @@ absl::Status ValidateHello(const v1::SensorHello& hello) {
   if (hello.software_version().size() > 128) {
     return absl::InvalidArgumentError(
         absl::StrCat("camera '", hello.camera_id(), "': hello.software_version longer than 128 characters"));
+  }
+  if (!v1::SensorKind_IsValid(hello.kind())) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("sensor '", hello.camera_id(), "': hello.kind ", hello.kind(), " is not a known sensor kind"));
+  }
+  if (hello.kind() == v1::SENSOR_KIND_ROTATING_LIDAR) {
+    if (hello.has_intrinsics()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("lidar '", hello.camera_id(), "': hello.intrinsics must be absent for a rotating LiDAR"));
+    }
+    return absl::OkStatus();
   }
   if (hello.intrinsics().distortion_size() != 0 && hello.intrinsics().distortion_size() != 5) {
     return absl::InvalidArgumentError(absl::StrCat("camera '", hello.camera_id(),
@@ -179,6 +192,68 @@ absl::Status ValidateFrame(const v1::SensorFrame& frame, const v1::Intrinsics& i
                                                      " but the camera's intrinsics say ", intrinsics.width(), "x",
                                                      intrinsics.height()));
     }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ValidateLidarSweep(const v1::LidarSweepFrame& sweep, uint64_t last_sequence, const FrameLimits& limits) {
+  const std::string where = absl::StrCat("sweep ", sweep.sequence(), ": ");
+  const auto bad = [&](auto&&... what) { return absl::InvalidArgumentError(absl::StrCat(where, what...)); };
+  if (sweep.sequence() <= last_sequence) return bad("sequence must increase (last accepted ", last_sequence, ")");
+  if (sweep.capture_time_ns() <= 0 || sweep.capture_time_ns() > kMaxTimeNs) {
+    return bad("capture_time_ns must be in (0, ", kMaxTimeNs, "]");
+  }
+  if (sweep.clock_offset_ns() < -kMaxClockOffsetNs || sweep.clock_offset_ns() > kMaxClockOffsetNs) {
+    return bad("clock_offset_ns must be within +-", kMaxClockOffsetNs, " ns (one day)");
+  }
+  if (sweep.has_world_from_sensor()) {
+    if (absl::Status s = ValidatePose(sweep.world_from_sensor(), where + "world_from_sensor"); !s.ok()) return s;
+  }
+  if (sweep.tracks_size() > limits.max_foot_tracks) {
+    return bad(sweep.tracks_size(), " tracks (at most ", limits.max_foot_tracks, ")");
+  }
+  // Ids unique within the sweep: a sorted copy (at most max_foot_tracks of them).
+  std::vector<uint32_t> ids;
+  ids.reserve(sweep.tracks_size());
+  constexpr double kMaxCoordinateM = 1e7;  // the local frame is site-sized; this only bounds the sums
+  constexpr float kMaxSpeedMps = 100;
+  for (int i = 0; i < sweep.tracks_size(); ++i) {
+    const v1::FootTrack& t = sweep.tracks(i);
+    const std::string field = absl::StrCat("tracks[", i, "]");
+    if (t.track_id() == 0) return bad(field, ".track_id must be > 0");
+    ids.push_back(t.track_id());
+    const v1::Vec3& p = t.position();
+    for (double v : {p.x(), p.y(), p.z()}) {
+      if (!std::isfinite(v) || std::abs(v) > kMaxCoordinateM) {
+        return bad(field, ".position must be finite and within ", kMaxCoordinateM, " m of the local origin");
+      }
+    }
+    if (!std::isfinite(t.velocity_x_mps()) || !std::isfinite(t.velocity_y_mps()) ||
+        std::hypot(t.velocity_x_mps(), t.velocity_y_mps()) > kMaxSpeedMps) {
+      return bad(field, ".velocity must be finite and under ", kMaxSpeedMps, " m/s");
+    }
+    if (t.covariance_size() != 3) {
+      return bad(field, ".covariance must have 3 values (xx, xy, yy), not ", t.covariance_size());
+    }
+    const double xx = t.covariance(0), xy = t.covariance(1), yy = t.covariance(2);
+    if (!std::isfinite(xx) || !std::isfinite(xy) || !std::isfinite(yy)) return bad(field, ".covariance must be finite");
+    // Positive semi-definite, with a little room for float rounding of a singular matrix.
+    if (xx < 0 || yy < 0 || xx * yy - xy * xy < -1e-6 * (xx * yy + 1e-12)) {
+      return bad(field, ".covariance (", xx, ", ", xy, ", ", yy, ") is not positive semi-definite");
+    }
+  }
+  std::sort(ids.begin(), ids.end());
+  if (auto dup = std::adjacent_find(ids.begin(), ids.end()); dup != ids.end()) {
+    return bad("track_id ", *dup, " appears twice");
+  }
+  const v1::LidarPoints& points = sweep.foreground();
+  if (points.count() > limits.max_lidar_points) {
+    return absl::ResourceExhaustedError(
+        absl::StrCat(where, "foreground.count ", points.count(), " points (at most ", limits.max_lidar_points, ")"));
+  }
+  if (points.packed().size() != size_t{points.count()} * 8) {
+    return bad("foreground.packed is ", points.packed().size(), " bytes; count ", points.count(), " needs ",
+               size_t{points.count()} * 8);
   }
   return absl::OkStatus();
 }

@@ -26,12 +26,17 @@ absl::StatusOr<JpegInfo> ParseJpegHeader(std::string_view bytes);
 struct FrameLimits {
   size_t max_jpeg_bytes = 8u << 20;  // 8 MiB
   int max_boxes = 1024;
+  // Rotating LiDARs (issue 16): people per sweep, and foreground points per sweep (8 bytes each:
+  // 2 MiB; a 64-beam sensor returns ~130 k points a sweep, people are a small part of them).
+  int max_foot_tracks = 1024;
+  uint32_t max_lidar_points = 262144;
 };
 
 // Camera ids: [A-Za-z0-9_.-], 1..64 characters.
 bool IsValidCameraId(std::string_view id);
 
-// Hello: id, token presence, intrinsics. Errors name the field.
+// Hello: id, token presence, kind, intrinsics (a camera's; a LiDAR must send none). Errors name
+// the field.
 absl::Status ValidateHello(const v1::SensorHello& hello);
 
 // Pose: finite position, finite unit quaternion (|1 - |q|| <= 1e-3), covariance empty or 36 finite
@@ -42,5 +47,13 @@ absl::Status ValidatePose(const v1::Pose& pose, const std::string& field);
 // capture_time_ns must be in (0, 4e18] and clock_offset_ns within one day either way.
 absl::Status ValidateFrame(const v1::SensorFrame& frame, const v1::Intrinsics& intrinsics, uint64_t last_sequence,
                            const FrameLimits& limits);
+
+// One sweep of a rotating LiDAR's stream (issue 16). Same sequence, time and offset rules as
+// ValidateFrame; world_from_sensor as ValidatePose; every track with an id > 0 unique in the sweep,
+// a finite position within 1e7 m of the local origin, a finite velocity under 100 m/s, a
+// covariance of exactly 3 finite values (xx, xy, yy) that is positive semi-definite; foreground
+// points within the limit, packed as exactly count * 8 bytes (not decoded). Errors start
+// "sweep N: " and name the field ("sweep 12: tracks[3].covariance ...").
+absl::Status ValidateLidarSweep(const v1::LidarSweepFrame& sweep, uint64_t last_sequence, const FrameLimits& limits);
 
 }  // namespace ave

@@ -125,5 +125,123 @@ TEST(ValidateHello, NamesTheField) {
   EXPECT_THAT(std::string(ValidateHello(hello).message()), HasSubstr("hello.intrinsics.fx"));
 }
 
+// ---- Rotating LiDAR streams (issue 16) ----
+
+v1::LidarSweepFrame GoodSweep(uint64_t seq) {
+  v1::LidarSweepFrame s;
+  s.set_sequence(seq);
+  s.set_capture_time_ns(2'000'000'000);
+  s.mutable_world_from_sensor()->mutable_orientation()->set_w(1);
+  for (uint32_t id : {3u, 7u}) {
+    v1::FootTrack* t = s.add_tracks();
+    t->set_track_id(id);
+    t->mutable_position()->set_x(4.0 * id);
+    t->mutable_position()->set_y(-2);
+    t->set_velocity_x_mps(1.2f);
+    for (float c : {0.04f, 0.01f, 0.05f}) t->add_covariance(c);
+  }
+  s.mutable_foreground()->set_count(2);
+  s.mutable_foreground()->set_packed(std::string(16, '\x01'));
+  return s;
+}
+
+std::string SweepError(const v1::LidarSweepFrame& s, const FrameLimits& limits = {}) {
+  return std::string(ValidateLidarSweep(s, 0, limits).message());
+}
+
+TEST(ValidateLidarSweep, AcceptsAGoodSweepAndOneWithoutPointsOrPose) {
+  EXPECT_TRUE(ValidateLidarSweep(GoodSweep(1), 0, {}).ok());
+  v1::LidarSweepFrame s = GoodSweep(1);
+  s.clear_foreground();
+  s.clear_world_from_sensor();
+  s.clear_tracks();
+  EXPECT_TRUE(ValidateLidarSweep(s, 0, {}).ok());
+}
+
+TEST(ValidateLidarSweep, NonFiniteTrackFieldsAreNamed) {
+  v1::LidarSweepFrame s = GoodSweep(4);
+  s.mutable_tracks(1)->mutable_position()->set_y(NAN);
+  EXPECT_THAT(SweepError(s), HasSubstr("sweep 4: tracks[1].position"));
+  s = GoodSweep(4);
+  s.mutable_tracks(0)->mutable_position()->set_z(INFINITY);
+  EXPECT_THAT(SweepError(s), HasSubstr("tracks[0].position"));
+  s = GoodSweep(4);
+  s.mutable_tracks(0)->set_velocity_y_mps(NAN);
+  EXPECT_THAT(SweepError(s), HasSubstr("tracks[0].velocity"));
+  s = GoodSweep(4);
+  s.mutable_tracks(1)->set_covariance(1, INFINITY);
+  EXPECT_THAT(SweepError(s), HasSubstr("tracks[1].covariance must be finite"));
+  s = GoodSweep(4);
+  s.mutable_world_from_sensor()->mutable_orientation()->set_w(2);
+  EXPECT_THAT(SweepError(s), HasSubstr("world_from_sensor.orientation"));
+}
+
+TEST(ValidateLidarSweep, CovarianceMustBeThreeValuesPositiveSemiDefinite) {
+  v1::LidarSweepFrame s = GoodSweep(1);
+  s.mutable_tracks(0)->add_covariance(0.1f);
+  EXPECT_THAT(SweepError(s), HasSubstr("tracks[0].covariance must have 3 values"));
+  s = GoodSweep(1);
+  s.mutable_tracks(0)->set_covariance(0, -0.01f);
+  EXPECT_THAT(SweepError(s), HasSubstr("not positive semi-definite"));
+  s = GoodSweep(1);
+  s.mutable_tracks(0)->set_covariance(1, 0.5f);  // |xy| > sqrt(xx yy)
+  EXPECT_THAT(SweepError(s), HasSubstr("not positive semi-definite"));
+  s = GoodSweep(1);
+  s.mutable_tracks(0)->set_covariance(1, 0.0f);  // a singular but valid one: xx = yy = xy = 0
+  s.mutable_tracks(0)->set_covariance(0, 0.0f);
+  s.mutable_tracks(0)->set_covariance(2, 0.0f);
+  EXPECT_TRUE(ValidateLidarSweep(s, 0, {}).ok());
+}
+
+TEST(ValidateLidarSweep, IdsArePositiveAndUniqueAndSequencesIncrease) {
+  v1::LidarSweepFrame s = GoodSweep(1);
+  s.mutable_tracks(0)->set_track_id(0);
+  EXPECT_THAT(SweepError(s), HasSubstr("tracks[0].track_id must be > 0"));
+  s = GoodSweep(1);
+  s.mutable_tracks(1)->set_track_id(3);
+  EXPECT_THAT(SweepError(s), HasSubstr("track_id 3 appears twice"));
+  EXPECT_THAT(std::string(ValidateLidarSweep(GoodSweep(5), 5, {}).message()), HasSubstr("sequence must increase"));
+  s = GoodSweep(1);
+  s.set_capture_time_ns(0);
+  EXPECT_THAT(SweepError(s), HasSubstr("capture_time_ns"));
+  s = GoodSweep(1);
+  s.set_clock_offset_ns(-9'223'372'036'854'775'807 - 1);
+  EXPECT_THAT(SweepError(s), HasSubstr("clock_offset_ns"));
+}
+
+TEST(ValidateLidarSweep, PointsAreCheckedBySizeAndBoundedNeverDecoded) {
+  v1::LidarSweepFrame s = GoodSweep(1);
+  s.mutable_foreground()->set_packed(std::string(15, '\0'));
+  EXPECT_THAT(SweepError(s), HasSubstr("foreground.packed is 15 bytes; count 2 needs 16"));
+  s = GoodSweep(1);
+  s.mutable_foreground()->set_count(0);
+  EXPECT_THAT(SweepError(s), HasSubstr("foreground.packed"));
+  FrameLimits limits;
+  limits.max_lidar_points = 1;
+  EXPECT_EQ(ValidateLidarSweep(GoodSweep(1), 0, limits).code(), absl::StatusCode::kResourceExhausted);
+  limits = {};
+  limits.max_foot_tracks = 1;
+  EXPECT_THAT(SweepError(GoodSweep(1), limits), HasSubstr("2 tracks (at most 1)"));
+  // A label byte past the track count is not the server's business: the bytes are forwarded.
+  s = GoodSweep(1);
+  s.mutable_foreground()->set_packed(std::string(16, '\xFF'));
+  EXPECT_TRUE(ValidateLidarSweep(s, 0, {}).ok());
+}
+
+TEST(ValidateHello, LidarHelloCarriesNoIntrinsicsAndKindsAreKnown) {
+  v1::SensorHello hello;
+  hello.set_camera_id("hdl64");
+  hello.set_token("t");
+  hello.set_kind(v1::SENSOR_KIND_ROTATING_LIDAR);
+  EXPECT_TRUE(ValidateHello(hello).ok());
+  *hello.mutable_intrinsics() = Intrinsics(64, 48);
+  EXPECT_THAT(std::string(ValidateHello(hello).message()), HasSubstr("lidar 'hdl64': hello.intrinsics must be absent"));
+  hello.set_kind(static_cast<v1::SensorKind>(9));
+  EXPECT_THAT(std::string(ValidateHello(hello).message()), HasSubstr("hello.kind 9"));
+  // A camera hello from an agent that predates issue 16 (no kind) is what it always was.
+  hello.clear_kind();
+  EXPECT_TRUE(ValidateHello(hello).ok());
+}
+
 }  // namespace
 }  // namespace ave

@@ -25,6 +25,10 @@ v1::Camera ToProto(const store::CameraRecord& r) {
   *c.mutable_mounting_pose() = ave::ToProto(r.world_from_camera);
   c.set_source_url(r.source_url);
   c.set_enabled(r.enabled);
+  if (r.kind == store::kSensorKindRotatingLidar) {
+    c.clear_intrinsics();
+    c.set_kind(v1::SENSOR_KIND_ROTATING_LIDAR);
+  }
   return c;
 }
 
@@ -36,6 +40,7 @@ CameraEntry ToEntry(const store::CameraRecord& r) {
   e.mounting_pose = r.world_from_camera;
   e.source_url = r.source_url;
   e.enabled = r.enabled;
+  e.kind = r.kind == store::kSensorKindRotatingLidar ? SensorKind::kRotatingLidar : SensorKind::kCamera;
   return e;
 }
 
@@ -58,10 +63,18 @@ grpc::Status AdminServiceImpl::Upsert(grpc::ServerContext* context, const v1::Ca
   if (!IsValidCameraId(camera.id())) {
     return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "camera.id must be 1..64 characters of [A-Za-z0-9_.-]");
   }
-  if (camera.intrinsics().distortion_size() != 0 && camera.intrinsics().distortion_size() != 5) {
+  if (!v1::SensorKind_IsValid(camera.kind())) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                        absl::StrCat(who, "camera.kind ", camera.kind(), " is not a known sensor kind"));
+  }
+  const bool lidar = camera.kind() == v1::SENSOR_KIND_ROTATING_LIDAR;
+  if (lidar && camera.has_intrinsics()) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, who + "camera.intrinsics must be absent for a rotating LiDAR");
+  }
+  if (!lidar && camera.intrinsics().distortion_size() != 0 && camera.intrinsics().distortion_size() != 5) {
     return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, who + "camera.intrinsics.distortion must have 0 or 5 values");
   }
-  if (const std::string why = FromProto(camera.intrinsics()).Check(); !why.empty()) {
+  if (const std::string why = FromProto(camera.intrinsics()).Check(); !lidar && !why.empty()) {
     return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, who + "camera.intrinsics." + why);
   }
   if (absl::Status s = ValidatePose(camera.mounting_pose(), "camera.mounting_pose"); !s.ok()) {
@@ -70,7 +83,8 @@ grpc::Status AdminServiceImpl::Upsert(grpc::ServerContext* context, const v1::Ca
   store::CameraRecord record;
   record.id = camera.id();
   record.name = camera.name();
-  record.intrinsics = FromProto(camera.intrinsics());
+  record.intrinsics = lidar ? PinholeIntrinsics{} : FromProto(camera.intrinsics());
+  record.kind = lidar ? store::kSensorKindRotatingLidar : store::kSensorKindCamera;
   record.world_from_camera = FromProto(camera.mounting_pose());
   record.source_url = camera.source_url();
   record.enabled = camera.enabled();

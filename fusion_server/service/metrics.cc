@@ -50,6 +50,7 @@ std::string ServerMetrics::RenderPrometheus() const {
   counter("ave_metadata_frames_in_total", "Replayed metadata-only sensor frames accepted.", metadata_frames_in);
   counter("ave_bytes_in_total", "JPEG bytes accepted from sensors.", bytes_in);
   counter("ave_frames_rejected_total", "Sensor frames refused by validation.", frames_rejected);
+  counter("ave_lidar_sweeps_in_total", "Rotating-LiDAR sweeps (foot tracks, points) accepted.", lidar_sweeps_in);
   counter("ave_frames_out_total", "JPEG frames written to viewers.", frames_out);
   counter("ave_bytes_out_total", "JPEG bytes written to viewers.", bytes_out);
   counter("ave_viewer_drops_total", "Frames skipped for slow viewers (latest-frame semantics).", viewer_drops);

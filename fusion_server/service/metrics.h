@@ -35,6 +35,7 @@ struct ServerMetrics {
   std::atomic<uint64_t> metadata_frames_in{0};  // replayed metadata-only frames
   std::atomic<uint64_t> bytes_in{0};
   std::atomic<uint64_t> frames_rejected{0};
+  std::atomic<uint64_t> lidar_sweeps_in{0};  // accepted rotating-LiDAR sweeps (issue 16)
   std::atomic<uint64_t> frames_out{0};      // JPEGs written to viewers
   std::atomic<uint64_t> bytes_out{0};
   std::atomic<uint64_t> viewer_drops{0};    // frames skipped for a slow viewer (latest-frame semantics)

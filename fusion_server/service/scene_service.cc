@@ -84,6 +84,7 @@ grpc::Status SceneServiceImpl::Subscribe(grpc::ServerContext* context, const v1:
     return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "max_rate_hz: must be 0 (server default) or at least 0.1 Hz");
   }
   ViewerCursor cursor;
+  cursor.include_lidar_points = request->include_lidar_points();
   if (grpc::Status s = SelectionViews(*request, chunks_, floor_z_, cursor); !s.ok()) return s;
   const std::vector<std::string> camera_ids(request->camera_ids().begin(), request->camera_ids().end());
   const float rate_hz = std::min(options_.max_viewer_rate_hz,

@@ -170,6 +170,18 @@ grpc::Status SensorServiceImpl::Stream(grpc::ServerContext* context,
   if (!camera->enabled) {
     return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION, absl::StrCat("camera '", id, "' is disabled"));
   }
+  const bool lidar_hello = hello.kind() == v1::SENSOR_KIND_ROTATING_LIDAR;
+  if (lidar_hello != (camera->kind == SensorKind::kRotatingLidar)) {
+    AVE_LOG(WARNING) << "sensor '" << id << "' (" << peer << "): hello kind does not match the registry";
+    return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
+                        absl::StrCat("sensor '", id, "' is registered as a ",
+                                     lidar_hello ? "camera" : "rotating LiDAR", " but its hello says ",
+                                     lidar_hello ? "rotating LiDAR" : "camera"));
+  }
+  if (lidar_hello) {
+    AVE_LOG(INFO) << "lidar '" << id << "' connected from " << peer << " (" << hello.software_version() << ")";
+    return StreamLidar(id, stream);
+  }
   AVE_LOG(INFO) << "camera '" << id << "' connected from " << peer << " (" << hello.software_version() << ", "
                 << hello.intrinsics().width() << "x" << hello.intrinsics().height() << ")";
   const uint64_t session = state_.StreamOpened(id, FromProto(hello.intrinsics()));
@@ -183,7 +195,8 @@ grpc::Status SensorServiceImpl::Stream(grpc::ServerContext* context,
   auto next_flow = std::chrono::steady_clock::now();
   while (stream->Read(&message)) {
     if (!message.has_frame()) {
-      result = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, absl::StrCat("camera '", id, "': a second hello"));
+      result = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                            absl::StrCat("camera '", id, "': ", message.has_hello() ? "a second hello" : "not a frame"));
       break;
     }
     if (absl::Status s = ValidateFrame(message.frame(), hello.intrinsics(), last_sequence, options_.frame_limits);
@@ -239,6 +252,57 @@ grpc::Status SensorServiceImpl::Stream(grpc::ServerContext* context,
   state_.StreamClosed(id);
   AVE_LOG(INFO) << "camera '" << id << "' disconnected after " << accepted << " frames"
                 << (metadata ? absl::StrCat(" and ", metadata, " replayed metadata records") : "")
+                << (result.ok() ? "" : " (" + result.error_message() + ")");
+  return result;
+}
+
+grpc::Status SensorServiceImpl::StreamLidar(const std::string& id,
+                                            grpc::ServerReaderWriter<v1::SensorAck, v1::SensorMessage>* stream) {
+  const uint64_t session = state_.StreamOpened(id);
+  ServerMetrics& metrics = shared_.metrics;
+  ++metrics.sensors_connected;
+  uint64_t last_sequence = 0, accepted = 0;
+  grpc::Status result = grpc::Status::OK;
+  v1::SensorMessage message;
+  while (stream->Read(&message)) {
+    if (!message.has_lidar_sweep()) {
+      result = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                            absl::StrCat("lidar '", id, "': ", message.has_hello() ? "a second hello" : "not a lidar_sweep"));
+      break;
+    }
+    if (absl::Status s = ValidateLidarSweep(message.lidar_sweep(), last_sequence, options_.frame_limits); !s.ok()) {
+      ++metrics.frames_rejected;
+      AVE_LOG(WARNING) << "lidar '" << id << "': refused " << s.message();
+      result = ToGrpc(absl::Status(s.code(), absl::StrCat("lidar '", id, "': ", s.message())));
+      break;
+    }
+    const int64_t received_ns = NowNs();
+    last_sequence = message.lidar_sweep().sequence();
+    const int64_t capture_ns = message.lidar_sweep().capture_time_ns();
+    const size_t bytes = message.lidar_sweep().foreground().packed().size();
+    auto sweep = std::make_shared<v1::LidarSweepFrame>(std::move(*message.mutable_lidar_sweep()));
+    if (absl::Status s = state_.AcceptLidarSweep(id, std::move(sweep), received_ns, session); !s.ok()) {
+      AVE_LOG(WARNING) << "lidar '" << id << "': " << s.message() << " (removed while streaming)";
+      result = ToGrpc(s);
+      break;
+    }
+    ++accepted;
+    ++metrics.lidar_sweeps_in;
+    metrics.bytes_in += bytes;
+    // No flow hint: a LiDAR's sweep rate is its spin rate, and its sweeps are small.
+    v1::SensorAck ack;
+    ack.set_sequence(last_sequence);
+    ack.set_server_time_ns(NowNs());
+    ack.set_capture_time_ns(capture_ns);
+    if (!stream->Write(ack)) break;
+    if (state_.shut_down()) {
+      result = grpc::Status(grpc::StatusCode::UNAVAILABLE, "server shutting down; reconnect later");
+      break;
+    }
+  }
+  --metrics.sensors_connected;
+  state_.StreamClosed(id);
+  AVE_LOG(INFO) << "lidar '" << id << "' disconnected after " << accepted << " sweeps"
                 << (result.ok() ? "" : " (" + result.error_message() + ")");
   return result;
 }

@@ -54,6 +54,8 @@ class SensorServiceImpl final : public v1::SensorService::Service {
                       grpc::ServerReaderWriter<v1::SensorAck, v1::SensorMessage>* stream) override;
 
  private:
+  // The rest of a rotating LiDAR's stream after its hello (issue 16): sweeps in, acks out.
+  grpc::Status StreamLidar(const std::string& id, grpc::ServerReaderWriter<v1::SensorAck, v1::SensorMessage>* stream);
   ServerShared& shared_;
   const ServerOptions& options_;
   SceneState& state_;

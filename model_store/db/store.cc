@@ -74,6 +74,11 @@ const std::vector<const char*>& Migrations() {
         PRIMARY KEY (scene_id, building_id, part),
         FOREIGN KEY (scene_id, building_id) REFERENCES buildings(scene_id, building_id) ON DELETE CASCADE);
       )sql",
+      // 3 -> 4: the sensor kind (issue 16): 'camera' (every row before) or 'rotating_lidar', which
+      // keeps zero intrinsics and its world_from_sensor in the pose columns.
+      R"sql(
+      ALTER TABLE cameras ADD COLUMN kind TEXT NOT NULL DEFAULT 'camera';
+      )sql",
   };
   return kSteps;
 }
@@ -243,7 +248,7 @@ absl::StatusOr<int> QueryInt(Db& db, const char* sql) {
 
 constexpr char kCameraColumns[] =
     "id, name, width, height, fx, fy, cx, cy, k1, k2, p1, p2, k3, qw, qx, qy, qz, tx, ty, tz, source_url, enabled, "
-    "updated_at_ns";
+    "updated_at_ns, kind";
 
 CameraRecord ReadCamera(const Stmt& s) {
   CameraRecord c;
@@ -260,6 +265,7 @@ CameraRecord ReadCamera(const Stmt& s) {
   c.source_url = s.Text(20);
   c.enabled = s.Int(21) != 0;
   c.updated_at_ns = s.Int(22);
+  c.kind = s.Text(23);
   return c;
 }
 
@@ -270,7 +276,7 @@ absl::Status BindCamera(Stmt& s, const CameraRecord& c, int64_t now_ns) {
   const Eigen::Vector3d& t = c.world_from_camera.translation;
   const auto& d = k.distortion;
   return s.Bind(c.id, c.name, k.width, k.height, k.fx, k.fy, k.cx, k.cy, d[0], d[1], d[2], d[3], d[4], q.w(), q.x(),
-                q.y(), q.z(), t.x(), t.y(), t.z(), c.source_url, c.enabled, now_ns);
+                q.y(), q.z(), t.x(), t.y(), t.z(), c.source_url, c.enabled, now_ns, c.kind);
 }
 
 }  // namespace
@@ -283,7 +289,16 @@ std::string ValidateCamera(const CameraRecord& c) {
   }
   if (!id_ok) return prefix + "id must match [A-Za-z0-9_.-]{1,64}";
   if (c.name.size() > 128) return prefix + "name must be at most 128 characters";
-  if (std::string why = c.intrinsics.Check(); !why.empty()) return prefix + "intrinsics." + why;
+  if (c.kind == kSensorKindRotatingLidar) {
+    const PinholeIntrinsics& k = c.intrinsics;
+    const bool zero = k.width == 0 && k.height == 0 && k.fx == 0 && k.fy == 0 && k.cx == 0 && k.cy == 0 &&
+                      k.distortion == std::array<double, 5>{};
+    if (!zero) return prefix + "intrinsics must be absent (zero) for a rotating LiDAR";
+  } else if (c.kind != kSensorKindCamera) {
+    return prefix + "kind must be '" + kSensorKindCamera + "' or '" + kSensorKindRotatingLidar + "', not '" + c.kind + "'";
+  } else if (std::string why = c.intrinsics.Check(); !why.empty()) {
+    return prefix + "intrinsics." + why;
+  }
   if (!c.world_from_camera.translation.allFinite()) return prefix + "world_from_camera.translation must be finite";
   const Eigen::Quaterniond& q = c.world_from_camera.rotation;
   if (!q.coeffs().allFinite()) return prefix + "world_from_camera.rotation must be finite";
@@ -343,7 +358,7 @@ absl::Status Store::AddCamera(const CameraRecord& camera) {
   if (std::string why = ValidateCamera(camera); !why.empty()) return absl::InvalidArgumentError(why);
   std::lock_guard lock(impl_->mu);
   AVE_ASSIGN_OR_RETURN(stmt, Stmt::Prepare(*impl_->db, (std::string("INSERT INTO cameras (") + kCameraColumns +
-                                                        ") VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)")
+                                                        ") VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)")
                                                            .c_str()));
   AVE_RETURN_IF_ERROR(BindCamera(stmt, camera, NowNs()));
   absl::Status s = stmt.Run();
@@ -359,7 +374,7 @@ absl::Status Store::UpdateCamera(const CameraRecord& camera) {
                                            "UPDATE cameras SET name=?2, width=?3, height=?4, fx=?5, fy=?6, cx=?7, "
                                            "cy=?8, k1=?9, k2=?10, p1=?11, p2=?12, k3=?13, qw=?14, qx=?15, qy=?16, "
                                            "qz=?17, tx=?18, ty=?19, tz=?20, source_url=?21, enabled=?22, "
-                                           "updated_at_ns=?23 WHERE id=?1"));
+                                           "updated_at_ns=?23, kind=?24 WHERE id=?1"));
   AVE_RETURN_IF_ERROR(BindCamera(stmt, camera, NowNs()));
   AVE_RETURN_IF_ERROR(stmt.Run());
   if (sqlite3_changes(impl_->db->get()) == 0) return absl::NotFoundError("camera '" + camera.id + "' not found");

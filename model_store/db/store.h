@@ -20,6 +20,12 @@
 
 namespace ave::store {
 
+// CameraRecord::kind values (schema v4, issue 16).
+inline constexpr char kSensorKindCamera[] = "camera";
+inline constexpr char kSensorKindRotatingLidar[] = "rotating_lidar";
+
+// A registered sensor: a camera, or a rotating LiDAR (kind "rotating_lidar": zero intrinsics,
+// world_from_camera is its world_from_sensor).
 struct CameraRecord {
   std::string id;    // [A-Za-z0-9_.-]{1,64}, the primary key
   std::string name;  // free text, at most 128 characters
@@ -28,6 +34,7 @@ struct CameraRecord {
   std::string source_url;     // at most 1024 characters; may be empty
   bool enabled = true;
   int64_t updated_at_ns = 0;  // set by the store on add/update; ignored on input
+  std::string kind = kSensorKindCamera;
 };
 
 struct StaticModelRecord {

@@ -553,3 +553,50 @@ TEST(StoreScenes, SceneTilesBuildingsAndProvenanceRoundTripExactly) {
 
 }  // namespace
 }  // namespace ave::store
+
+namespace ave::store {
+namespace {
+
+// Issue 16: a rotating LiDAR is registered like a camera, with its kind and no intrinsics.
+TEST(Store, Camera_RotatingLidarRoundTripsWithItsKindAndNoIntrinsics) {
+  auto store = Store::Open(":memory:");
+  ASSERT_TRUE(store.ok());
+  CameraRecord lidar = MakeCamera("hdl64");
+  lidar.kind = kSensorKindRotatingLidar;
+  EXPECT_THAT(ValidateCamera(lidar), HasSubstr("camera 'hdl64': intrinsics must be absent"));
+  lidar.intrinsics = PinholeIntrinsics{};
+  ASSERT_TRUE((*store)->AddCamera(lidar).ok());
+  auto got = (*store)->GetCamera("hdl64");
+  ASSERT_TRUE(got.ok());
+  EXPECT_EQ(got->kind, kSensorKindRotatingLidar);
+  ExpectSameCamera(lidar, *got);
+  lidar.kind = "radar";
+  EXPECT_THAT((*store)->UpdateCamera(lidar).message(), HasSubstr("kind must be 'camera' or 'rotating_lidar'"));
+  EXPECT_EQ((*store)->GetCamera("hdl64")->kind, kSensorKindRotatingLidar);
+}
+
+// Schema v3 -> v4: cameras registered before issue 16 read back as cameras, unchanged.
+TEST(Store, File_CamerasOfAVersion3StoreBecomeCameraKind) {
+  TempDir dir;
+  const std::string path = dir.File("v3.db");
+  {
+    auto store = OpenOrDie(path);
+    ASSERT_TRUE(store);
+    ASSERT_TRUE(store->AddCamera(MakeCamera("north")).ok());
+  }
+  {
+    RawDb raw(path);
+    ASSERT_EQ(raw.Exec("ALTER TABLE cameras DROP COLUMN kind"), SQLITE_OK);
+    ASSERT_EQ(raw.Exec("PRAGMA user_version = 3"), SQLITE_OK);
+  }
+  auto store = OpenOrDie(path);
+  ASSERT_TRUE(store);
+  EXPECT_EQ(store->SchemaVersion(), Store::LatestSchemaVersion());
+  auto got = store->GetCamera("north");
+  ASSERT_TRUE(got.ok());
+  EXPECT_EQ(got->kind, kSensorKindCamera);
+  ExpectSameCamera(MakeCamera("north"), *got);
+}
+
+}  // namespace
+}  // namespace ave::store

@@ -44,6 +44,10 @@ Runner AddLidarDecodeBench(CLI::App& sub);
 // configuration vs ms per sweep, next to OpenCV MOG2 on the range image (lidar_bench.cc).
 Runner AddLidarBench(CLI::App& sub);
 
+// `ave-bench lidar-wire` (issue 16): a rotating LiDAR's stream (tracks, labelled points) in bytes
+// and server time, next to a camera frame of the same scene (lidar_wire_bench.cc).
+Runner AddLidarWireBench(CLI::App& sub);
+
 // Pins the process to one CPU and keeps OpenCV single-threaded, so figures are per core.
 void UseOneCore();
 

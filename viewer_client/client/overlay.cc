@@ -316,7 +316,7 @@ bool Overlay::WantsMouse() const {
 }
 
 void Overlay::Panel(const std::vector<CameraView>& cameras, const OverlayStats& stats, int64_t now_ns,
-                    OverlayState& state) {
+                    OverlayState& state, const std::vector<LidarView>& lidars) {
   if (!state.panel) return;
   ImGui::SetNextWindowPos(ImVec2(8, 8), ImGuiCond_FirstUseEver);
   ImGui::SetNextWindowBgAlpha(0.78f);
@@ -382,6 +382,19 @@ void Overlay::Panel(const std::vector<CameraView>& cameras, const OverlayStats& 
       ImGui::PopID();
     }
     ImGui::TextDisabled("time line: frames received, last %.0f s; 1 2 3: lock a view", kTimelineSpanS);
+    // Rotating LiDARs (issue 16): no image to lock a view to; their status line counts the people
+    // they track and the points of their newest sweep.
+    for (size_t i = 0; i < lidars.size() && i < 64; ++i) {
+      const LidarView& lidar = lidars[i];
+      const float h = ImGui::GetTextLineHeight();
+      const ImVec2 p = ImGui::GetCursorScreenPos();
+      ImGui::GetWindowDrawList()->AddRectFilled(ImVec2(p.x + h / 4, p.y + h / 4 + 1), ImVec2(p.x + 3 * h / 4, p.y + 3 * h / 4 + 1),
+                                                StatusColor(lidar.status));
+      ImGui::Dummy(ImVec2(h, h));
+      ImGui::SameLine();
+      ImGui::Text("%s (LiDAR, %s): %zu people, %zu points", lidar.id.c_str(), StatusName(lidar.status),
+                  lidar.tracks.size(), lidar.points ? lidar.points->p_local.size() : size_t{0});
+    }
   }
   ImGui::Text("subscriptions: %llu  servers: %d", static_cast<unsigned long long>(stats.subscriptions), stats.servers);
   ImGui::PopItemWidth();

@@ -78,7 +78,9 @@ class Overlay {
   // Whether the panel took the mouse in this frame (then the 3D views ignore it).
   bool WantsMouse() const;
   // The panel; edits `state`. `now_ns`: the server clock of the newest update (time line).
-  void Panel(const std::vector<CameraView>& cameras, const OverlayStats& stats, int64_t now_ns, OverlayState& state);
+  // `lidars` are listed under the cameras with their own status line (issue 16).
+  void Panel(const std::vector<CameraView>& cameras, const OverlayStats& stats, int64_t now_ns, OverlayState& state,
+             const std::vector<LidarView>& lidars = {});
   // Camera names, object ids and paths in one view.
   void Annotate(const View& view, int framebuffer_height, const std::vector<CameraView>& cameras,
                 const std::vector<ObjectView>& objects, const OverlayState& state);

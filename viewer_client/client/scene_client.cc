@@ -187,6 +187,13 @@ std::vector<ObjectView> SceneClient::Objects() const {
   return objects_;
 }
 
+std::vector<LidarView> SceneClient::Lidars() const {
+  std::lock_guard lock(mu_);
+  std::vector<LidarView> out;
+  for (const auto& [id, lidar] : lidars_) out.push_back(lidar);
+  return out;
+}
+
 void SceneClient::SetViews(const SelectionViews& views) {
   std::lock_guard lock(mu_);
   wanted_views_ = views;
@@ -223,6 +230,38 @@ bool SceneClient::WaitUntil(const std::function<bool(const std::vector<CameraVie
   return ready(Snapshot());
 }
 
+void SceneClient::UpdateLidarLocked(const v1::LidarState& l, bool with_points) {
+  LidarView& v = lidars_[l.sensor_id()];
+  const bool new_sweep = l.sweep_sequence() != v.sweep_sequence;
+  v.id = l.sensor_id();
+  v.name = l.name();
+  v.world_from_sensor = ave::FromProto(l.pose());
+  v.status = FromProto(l.status());
+  v.sweep_capture_time_ns = l.sweep_capture_time_ns();
+  v.sweep_sequence = l.sweep_sequence();
+  v.tracks.clear();
+  for (int i = 0; i < l.tracks_size(); ++i) {
+    const v1::FootTrack& t = l.tracks(i);
+    v.tracks.push_back({t.track_id(),
+                        {t.position().x(), t.position().y(), t.position().z()},
+                        {t.velocity_x_mps(), t.velocity_y_mps()},
+                        i < l.track_object_ids_size() ? l.track_object_ids(i) : 0});
+  }
+  // A newer sweep without points had none (the server sends every newer sweep's points to a
+  // subscription that asked): the old cloud goes.
+  if (!with_points || (!new_sweep && l.foreground().count() == 0)) return;
+  absl::StatusOr<LidarPointCloud> cloud =
+      DecodeLidarPoints(l.foreground().packed(), l.foreground().count(), v.world_from_sensor, v.tracks);
+  if (!cloud.ok()) {
+    AVE_LOG(WARNING) << "viewer: lidar '" << v.id << "': " << cloud.status().message();
+    return;
+  }
+  cloud->sweep_sequence = v.sweep_sequence;
+  v.points = std::make_shared<const LidarPointCloud>(*std::move(cloud));
+  v.points_serial = next_serial_++;
+  v.points_received += l.foreground().count() > 0;
+}
+
 void SceneClient::Loop(SubscribeOptions options) {
   auto stub = v1::SceneService::NewStub(channel_);
   auto backoff = std::chrono::milliseconds(200);
@@ -235,6 +274,7 @@ void SceneClient::Loop(SubscribeOptions options) {
     request.set_max_rate_hz(options.max_rate_hz);
     request.set_include_jpeg(options.include_jpeg);
     request.set_max_jpeg_width(options.max_jpeg_width);
+    request.set_include_lidar_points(options.include_lidar_points);
     {
       std::lock_guard lock(mu_);
       context_ = context;
@@ -264,7 +304,9 @@ void SceneClient::Loop(SubscribeOptions options) {
         for (const auto& id : update.removed_camera_ids()) {
           cameras_.erase(id);
           pending_.erase(id);
+          lidars_.erase(id);
         }
+        for (const v1::LidarState& l : update.lidars()) UpdateLidarLocked(l, options.include_lidar_points);
         for (auto& cam : *update.mutable_cameras()) {
           CameraView& v = cameras_[cam.camera_id()];
           v.id = cam.camera_id();
@@ -299,6 +341,7 @@ void SceneClient::Loop(SubscribeOptions options) {
           ov.model = o.model();
           ov.kind = o.kind();
           ov.source_camera_id = o.source_camera_id();
+          ov.sensor_ids.assign(o.camera_ids().begin(), o.camera_ids().end());
           for (const auto& p : o.path()) ov.path.emplace_back(p.x(), p.y(), p.z());
           objects_.push_back(std::move(ov));
         }

@@ -20,9 +20,13 @@
 #include "model_store/geometry/camera.h"
 #include "model_store/geometry/mesh.h"
 #include "model_store/geometry/rigid3.h"
+#include "viewer_client/client/lidar_points.h"
 
 namespace grpc {
 class Channel;
+}
+namespace ave::v1 {
+class LidarState;
 }
 
 namespace ave::viewer {
@@ -64,6 +68,24 @@ struct ObjectView {
   uint32_t kind = 0;
   std::vector<Eigen::Vector3d> path;  // oldest first
   std::string source_camera_id;
+  std::vector<std::string> sensor_ids;  // every camera or LiDAR observing it (DynamicObject.camera_ids)
+};
+
+// A registered rotating LiDAR (issue 16; wire LidarState): not a camera, nothing to project. The
+// people it tracks arrive as objects (person-sized billboards unless a camera measured them); its
+// newest sweep's foreground points, when subscribed to, for a point-cloud layer.
+struct LidarView {
+  std::string id;
+  std::string name;
+  Rigid3d world_from_sensor;
+  CameraLiveness status = CameraLiveness::kUnknown;
+  int64_t sweep_capture_time_ns = 0;
+  uint64_t sweep_sequence = 0;
+  std::vector<LidarTrackView> tracks;             // the newest sweep's
+  std::shared_ptr<const LidarPointCloud> points;  // the newest sweep's points received; null: none yet
+  uint64_t points_serial = 0;                     // changes whenever `points` does
+  uint64_t points_received = 0;                   // point clouds received for this LiDAR
+  int server_index = 0;
 };
 
 // Data selection (issue 7): the frusta of the viewer's views, GL clip from the model's local frame.
@@ -84,6 +106,8 @@ struct SubscribeOptions {
   float max_rate_hz = 30;
   bool include_jpeg = true;
   uint32_t max_jpeg_width = 0;  // hint to the server, 0 = any
+  // Rotating LiDARs' foreground points (issue 16); their tracks and status come regardless.
+  bool include_lidar_points = true;
   // Data selection: re-subscribe with new views at most this often (SetViews).
   std::chrono::milliseconds reselect_interval{500};
   // The image size the renderer resamples frames to (its video layer; 0 = keep full size): a
@@ -115,6 +139,8 @@ class SceneClient {
   // newest: a frame superseded before anyone asked for it is never decoded (issue 7 performance).
   std::vector<CameraView> Snapshot() const;
   std::vector<ObjectView> Objects() const;
+  // The rotating LiDARs as last received (issue 16), by id.
+  std::vector<LidarView> Lidars() const;
   uint64_t updates_received() const { return updates_.load(); }
   uint64_t jpeg_bytes_received() const { return jpeg_bytes_.load(); }
   uint64_t subscriptions() const { return subscriptions_.load(); }  // Subscribe calls made (re-subscribes count)
@@ -138,6 +164,7 @@ class SceneClient {
 
  private:
   void Loop(SubscribeOptions options);
+  void UpdateLidarLocked(const v1::LidarState& lidar, bool with_points);
 
   std::shared_ptr<grpc::Channel> channel_;
   std::string token_;
@@ -155,6 +182,7 @@ class SceneClient {
   mutable std::map<std::string, PendingJpeg> pending_;
   mutable std::atomic<uint64_t> jpegs_decoded_{0};
   std::vector<ObjectView> objects_;
+  std::map<std::string, LidarView> lidars_;
   SelectionViews wanted_views_, subscribed_views_;
   std::chrono::steady_clock::time_point last_subscribe_{};
   bool resubscribe_ = false;  // the current subscription was cancelled to change views

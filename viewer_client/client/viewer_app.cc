@@ -234,6 +234,20 @@ class Session {
     return out;
   }
 
+  // Every server's rotating LiDARs (issue 16), by id; the first server's on a duplicate id.
+  std::vector<LidarView> Lidars() const {
+    std::map<std::string, LidarView> out;
+    for (size_t i = 0; i < clients_.size(); ++i) {
+      for (LidarView& lidar : clients_[i]->Lidars()) {
+        lidar.server_index = static_cast<int>(i);
+        out.try_emplace(lidar.id, std::move(lidar));
+      }
+    }
+    std::vector<LidarView> list;
+    for (auto& [id, lidar] : out) list.push_back(std::move(lidar));
+    return list;
+  }
+
   std::vector<View> ComputeViews(const std::vector<CameraView>& cams, int w, int h) {
     if (options_.locked_cameras.empty() && !auto_locked_ && cams.size() > 0) {
       for (size_t i = 0; i < cams.size() && i < 3; ++i) state_.locked[i] = cams[i].id;  // the first by id
@@ -308,7 +322,7 @@ class Session {
       const int builds = frames_ == 0 ? 2 : 1;  // the first frame twice: auto-sized windows get their size
       for (int b = 0; b < builds; ++b) {
         overlay_->BeginFrame(w, h, input, dt);
-        if (state_.panel) overlay_->Panel(listed, stats, now_ns, state_);
+        if (state_.panel) overlay_->Panel(listed, stats, now_ns, state_, Lidars());
         for (const View& v : views) overlay_->Annotate(v, h, listed, objects, state_);
         if (b + 1 < builds) overlay_->DiscardFrame();
       }
