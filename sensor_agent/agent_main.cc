@@ -12,6 +12,8 @@
 #include "sensor_agent/detect/detect_run.h"
 #include "sensor_agent/lidar/lidar_detect_only.h"
 #include "sensor_agent/lidar/lidar_source.h"
+#include "sensor_agent/lidar_track/people_tracker.h"
+#include "sensor_agent/stream/lidar_streamer.h"
 #include "model_store/scene/intrinsics_file.h"
 #include "sensor_agent/pose/pose_source.h"
 #include "sensor_agent/stream/agent_streamer.h"
@@ -55,18 +57,61 @@ int RunDetectOnly(const std::string& source_spec, const ave::AgentOptions& optio
 
 // ---- LiDAR mode (issue 16): --source pcap:FILE, udp:[ADDR:]PORT or sim:SCENARIO#LIDAR ----
 
-// >>> The one place where ave-agent's SweepTracker is constructed. The LiDAR people tracker
-// (sensor_agent/lidar_track/, issue 16) is wired in here by returning it; until then this returns
-// an empty function and the LiDAR mode says the tracker is not built in (no fake tracks).
-ave::lidar::SweepTracker MakeSweepTracker() { return {}; }
+// The one place where ave-agent's SweepTracker is constructed: the LiDAR people tracker
+// (sensor_agent/lidar_track, i4D §3.1-3.2) with its default options (docs/LIDAR.md).
+ave::lidar::SweepTracker MakeSweepTracker() { return ave::lidar_track::MakeSweepTracker(); }
 
-int RunLidarMode(const std::string& source_spec, bool detect_only, const std::string& tracks_out,
-                 const std::string& calibration_file, int64_t max_sweeps) {
-  if (!detect_only) {
-    std::cerr << "ave-agent: " << source_spec
-              << " is a LiDAR source; streaming LiDAR tracks to the server is not built in yet (issue 16): use --detect-only\n";
+// Streams a LiDAR's foot tracks (and its people's points) to the server (issue 16).
+int StreamLidarSource(std::unique_ptr<ave::lidar::LidarSource> source, const ave::AgentOptions& options,
+                      bool send_points, uint32_t max_points) {
+  if (options.camera_id.empty()) {
+    std::cerr << "ave-agent: --camera is required (the LiDAR's registered id) unless --detect-only\n";
     return 2;
   }
+  ave::LidarStreamOptions l;
+  l.server = options.server;
+  l.sensor_id = options.camera_id;
+  l.token = options.token;
+  l.tls = options.tls;
+  l.max_sweeps = options.max_frames;
+  l.duration_s = options.duration_s;
+  // A replay or the simulator delivers sweeps as fast as asked: pace them at the sensor's spin
+  // rate and stamp them on arrival (their own times are a file's or a scenario's).
+  l.stamp_on_arrival = !source->live();
+  l.pace_hz = source->live() ? 0 : source->rate_hz();
+  l.send_points = send_points;
+  l.max_points = max_points;
+  if (const std::string bad = l.Check(); !bad.empty()) {
+    std::cerr << "ave-agent: " << bad << "\n";
+    return 2;
+  }
+  ave::lidar::LidarSource* raw = source.get();
+  ave::LidarStreamer streamer(l, [raw] { return raw->Next(); }, MakeSweepTracker());
+  const absl::Status status = streamer.Run(g_stop);
+  const ave::LidarStreamStats st = streamer.stats();
+  std::cout << "{\"sensor\":\"" << l.sensor_id << "\",\"sweeps_read\":" << st.sweeps_read << ",\"sweeps_sent\":" << st.sweeps_sent
+            << ",\"sweeps_acked\":" << st.sweeps_acked << ",\"tracks_sent\":" << st.tracks_sent << ",\"points_sent\":"
+            << st.points_sent << ",\"connects\":" << st.connects << "}" << std::endl;
+  if (!status.ok()) {
+    std::cerr << "ave-agent: " << status.message() << "\n";
+    return 1;
+  }
+  return 0;
+}
+
+int RunLidarMode(const std::string& source_spec, bool detect_only, const std::string& tracks_out,
+                 const std::string& calibration_file, const ave::AgentOptions& options, bool send_points,
+                 uint32_t max_points) {
+  if (!detect_only) {
+    ave::lidar::KeepSweepBuffersInProcess();
+    auto source = ave::lidar::OpenLidarSource(source_spec, {.calibration_file = calibration_file});
+    if (!source.ok()) {
+      std::cerr << "ave-agent: " << source.status().message() << "\n";
+      return 1;
+    }
+    return StreamLidarSource(std::move(*source), options, send_points, max_points);
+  }
+  const int64_t max_sweeps = options.max_frames;
   if (tracks_out.empty()) {
     std::cerr << "ave-agent: --detect-only needs --out FILE (or '-')\n";
     return 2;
@@ -119,6 +164,11 @@ int main(int argc, char** argv) {
       ->required();
   std::string lidar_calibration;
   app.add_option("--calibration", lidar_calibration, "LiDAR sources: Velodyne db.xml or ROS velodyne YAML (default: the model's built-in)");
+  bool no_lidar_points = false;
+  app.add_flag("--no-lidar-points", no_lidar_points, "LiDAR sources: stream foot tracks only, not the people's points");
+  uint32_t lidar_max_points = 2048;
+  app.add_option("--lidar-max-points", lidar_max_points, "LiDAR sources: at most this many people points a sweep (thinned evenly)")
+      ->capture_default_str()->check(ave::cli::Range(1, 65535));
   app.add_option("--fps", options.fps, "frames per second to send")->capture_default_str()->check(ave::cli::Range(0.1, 240.0));
   app.add_option("--jpeg-quality", options.jpeg_quality, "JPEG quality 1..100")->capture_default_str()->check(ave::cli::Range(1, 100));
   app.add_option("--max-frames", options.max_frames, "stop after N frames (0 = never)")->capture_default_str();
@@ -158,7 +208,9 @@ int main(int argc, char** argv) {
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-agent")) return *exit_code;
   // A scenario knows whether an id names a camera or a rotating LiDAR; pcap: and udp: are LiDAR.
   absl::StatusOr<bool> lidar = ave::lidar::IsLidarSourceSpec(source_spec);
-  if (lidar.ok() && *lidar) return RunLidarMode(source_spec, detect_only, tracks_out, lidar_calibration, options.max_frames);
+  if (lidar.ok() && *lidar) {
+    return RunLidarMode(source_spec, detect_only, tracks_out, lidar_calibration, options, !no_lidar_points, lidar_max_points);
+  }
   ave::detect::DetectorOptions detector_options;
   ave::detect::ParseBackgroundKind(background, detector_options.background);
   if (detect_only) {

@@ -16,6 +16,7 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "sensor_agent/lidar/pcap_reader.h"
+#include "sensor_agent/lidar/sim_sweep.h"
 #include "sensor_agent/lidar/velodyne_decoder.h"
 #include "sensor_agent/sim/rotating_lidar.h"
 #include "sensor_agent/sim/scenario.h"
@@ -23,7 +24,6 @@
 namespace ave::lidar {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 
 bool StartsWith(const std::string& s, const std::string& prefix) { return s.rfind(prefix, 0) == 0; }
 
@@ -35,33 +35,12 @@ class SimLidarSource final : public LidarSource {
       : scenario_(std::move(scenario)),
         simulator_(scenario_->world, spec, scenario_->effects, scenario_->seed, options.sim_world_from_sensor_rotation),
         options_(options),
-        world_from_sensor_(Eigen::Quaterniond(options.sim_world_from_sensor_rotation), spec.position_m) {
-    for (int r = 0; r < spec.rings; ++r) {
-      const double deg = spec.rings == 1 ? spec.fov_up_deg : spec.fov_up_deg - r * (spec.fov_up_deg - spec.fov_down_deg) / (spec.rings - 1);
-      ring_elevation_rad_.push_back(static_cast<float>(deg * kPi / 180));
-    }
-  }
+        world_from_sensor_(Eigen::Quaterniond(options.sim_world_from_sensor_rotation), spec.position_m) {}
 
   absl::StatusOr<LidarSweep> Next() override {
     const double t_s = options_.sim_start_s + static_cast<double>(index_++) / simulator_.spec().rate_hz;
-    sim::LidarFrame frame = simulator_.Frame(t_s);
-    LidarSweep sweep;
+    LidarSweep sweep = SweepFromSimFrame(simulator_.Frame(t_s), simulator_.spec(), world_from_sensor_);
     sweep.t_ns = static_cast<int64_t>(std::llround(t_s * 1e9));
-    sweep.rings = simulator_.spec().rings;
-    sweep.ring_elevation_rad = ring_elevation_rad_;
-    sweep.world_from_sensor = world_from_sensor_;
-    sweep.points.reserve(frame.points.size());
-    for (const sim::LidarPoint& p : frame.points) {
-      SweepPoint s;
-      s.p_in_sensor = p.p_local;
-      s.range_m = p.range_m;
-      s.intensity = p.intensity;
-      s.azimuth_rad = p.azimuth_rad;
-      s.ring = p.ring;
-      s.truth_label = p.label;
-      sweep.points.push_back(s);
-    }
-    sweep.truth_feet_in_world = std::move(frame.pedestrian_feet);
     return sweep;
   }
   std::string description() const override { return "simulated " + scenario_->name + " rotating LiDAR " + simulator_.spec().id; }
@@ -73,7 +52,6 @@ class SimLidarSource final : public LidarSource {
   sim::RotatingLidarSimulator simulator_;
   LidarSourceOptions options_;
   Rigid3d world_from_sensor_;
-  std::vector<float> ring_elevation_rad_;
   int64_t index_ = 0;
 };
 

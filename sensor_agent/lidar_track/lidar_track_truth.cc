@@ -11,30 +11,6 @@
 
 namespace ave::lidar_track::testing {
 
-lidar::LidarSweep SweepFromSimFrame(const sim::LidarFrame& frame, const sim::RotatingLidarSpec& spec) {
-  lidar::LidarSweep sweep;
-  sweep.t_ns = frame.t_ns;
-  sweep.rings = spec.rings;
-  for (int r = 0; r < spec.rings; ++r) {
-    const double deg = spec.rings == 1 ? spec.fov_up_deg : spec.fov_up_deg - r * (spec.fov_up_deg - spec.fov_down_deg) / (spec.rings - 1);
-    sweep.ring_elevation_rad.push_back(static_cast<float>(deg * std::numbers::pi / 180));
-  }
-  sweep.points.reserve(frame.points.size());
-  for (const sim::LidarPoint& p : frame.points) {
-    lidar::SweepPoint q;
-    q.p_in_sensor = p.p_local;
-    q.range_m = p.range_m;
-    q.intensity = p.intensity;
-    q.azimuth_rad = p.azimuth_rad;
-    q.ring = p.ring;
-    q.truth_label = p.label;
-    sweep.points.push_back(q);
-  }
-  sweep.world_from_sensor = Rigid3d(Eigen::Quaterniond::Identity(), spec.position_m);
-  sweep.truth_feet_in_world = frame.pedestrian_feet;
-  return sweep;
-}
-
 sim::Scenario CrowdedCourtyard(sim::Scenario s) {
   s.name += "-crowd";
   auto add = [&](uint32_t id, std::vector<Eigen::Vector2d> path, double speed, double offset) {

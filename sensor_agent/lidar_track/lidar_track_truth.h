@@ -12,15 +12,14 @@
 
 #include "model_store/geometry/rigid3.h"
 #include "sensor_agent/lidar/lidar_types.h"
+#include "sensor_agent/lidar/sim_sweep.h"
 #include "sensor_agent/sim/rotating_lidar.h"
 #include "sensor_agent/sim/scenario.h"
 
 namespace ave::lidar_track::testing {
 
-// The simulator's frame as a sweep: ring = row, elevations from the spec, truth labels, truth feet
-// in the world (= the scenario's local frame), world_from_sensor at the spec's position (axes
-// parallel to the local ENU axes, as the simulator's sensor frame).
-lidar::LidarSweep SweepFromSimFrame(const sim::LidarFrame& frame, const sim::RotatingLidarSpec& spec);
+// The simulator's frame as a sweep (sensor_agent/lidar/sim_sweep.h).
+using lidar::SweepFromSimFrame;
 
 // The courtyard plus 10 more people crossing, one loitering at 0.1 m/s (id 120, near (6, 6)) and two
 // walking shoulder to shoulder (ids 121, 122, 0.7 m apart): 25 people. Keeps the courtyard's effects

@@ -3,14 +3,9 @@
 #include <ctime>
 
 #include "absl/strings/str_cat.h"
+#include "model_store/common/cpu_clock.h"
 
 namespace ave::lidar_track {
-
-double ThreadCpuSeconds() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return ts.tv_sec + 1e-9 * ts.tv_nsec;
-}
 
 std::string LidarPeopleTrackerOptions::Check() const {
   if (std::string why = foreground.Check(); !why.empty()) return "foreground." + why;

@@ -82,7 +82,5 @@ class LidarPeopleTracker {
 // An online tracker behind the SweepTracker seam (lidar_types.h); the tracker lives in the closure.
 lidar::SweepTracker MakeSweepTracker(LidarPeopleTrackerOptions options = {});
 
-// CPU time of the calling thread, seconds (what "ms per frame on one core" means in ave-bench).
-double ThreadCpuSeconds();
 
 }  // namespace ave::lidar_track

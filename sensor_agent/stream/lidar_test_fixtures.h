@@ -12,6 +12,7 @@
 #include <Eigen/Core>
 
 #include "sensor_agent/lidar/lidar_types.h"
+#include "sensor_agent/lidar/sim_sweep.h"
 #include "sensor_agent/sim/rotating_lidar.h"
 
 namespace ave::fixtures {
@@ -20,28 +21,7 @@ namespace ave::fixtures {
 // elevations, world_from_sensor (the simulator's sensor axes are the site's ENU axes), truth feet.
 // t_ns is the frame's scenario time; callers that stream it restamp it on their clock.
 inline lidar::LidarSweep SweepFromSim(const sim::LidarFrame& frame, const sim::RotatingLidarSpec& spec) {
-  lidar::LidarSweep sweep;
-  sweep.t_ns = frame.t_ns;
-  sweep.rings = spec.rings;
-  for (int r = 0; r < spec.rings; ++r) {
-    const double deg = spec.rings == 1 ? spec.fov_up_deg
-                                       : spec.fov_up_deg - r * (spec.fov_up_deg - spec.fov_down_deg) / (spec.rings - 1);
-    sweep.ring_elevation_rad.push_back(static_cast<float>(deg * M_PI / 180));
-  }
-  sweep.points.reserve(frame.points.size());
-  for (const sim::LidarPoint& p : frame.points) {
-    lidar::SweepPoint q;
-    q.p_in_sensor = p.p_local;
-    q.range_m = p.range_m;
-    q.intensity = p.intensity;
-    q.azimuth_rad = p.azimuth_rad;
-    q.ring = p.ring;
-    q.truth_label = p.label;
-    sweep.points.push_back(q);
-  }
-  sweep.world_from_sensor = Rigid3d(Eigen::Quaterniond::Identity(), spec.position_m);
-  sweep.truth_feet_in_world = frame.pedestrian_feet;
-  return sweep;
+  return lidar::SweepFromSimFrame(frame, spec);
 }
 
 // Tracks straight from the simulator's truth (TEST FIXTURE, see above): one confirmed track per

@@ -29,6 +29,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/background_segm.hpp>
 
+#include "model_store/common/cpu_clock.h"
 #include "sensor_agent/lidar_track/lidar_track_truth.h"
 #include "sensor_agent/lidar_track/people_tracker.h"
 #include "sensor_agent/lidar_track/range_image.h"
@@ -42,7 +43,6 @@ namespace {
 
 using lidar_track::LidarPeopleTracker;
 using lidar_track::LidarPeopleTrackerOptions;
-using lidar_track::ThreadCpuSeconds;
 namespace lt = lidar_track::testing;
 
 struct LidarBenchOptions {
