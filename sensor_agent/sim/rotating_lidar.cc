@@ -314,7 +314,7 @@ struct RotatingLidarSimulator::Impl {
 RotatingLidarSimulator::RotatingLidarSimulator(const scene::SyntheticCampus& campus, const RotatingLidarSpec& spec,
                                                const EffectSet& effects, uint64_t seed, const Eigen::Matrix3d& enu_from_sensor)
     : impl_(std::make_unique<Impl>(Impl{campus, spec, effects, seed, enu_from_sensor,
-                                        spec.Check().empty() ? internal::BuildStaticLidarMesh(campus, kTerrainResolution_m)
+                                        spec.Check().empty() ? internal::BuildStaticLidarMesh(campus, internal::kLidarTerrainResolution_m)
                                                              : LabelledMesh{}})) {}
 
 RotatingLidarSimulator::~RotatingLidarSimulator() = default;
