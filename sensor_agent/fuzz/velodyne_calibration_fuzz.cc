@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "model_store/common/log.h"
 #include "sensor_agent/fuzz/sweep_checks.h"
 #include "sensor_agent/lidar/velodyne_calibration.h"
 #include "sensor_agent/lidar/velodyne_decoder.h"
@@ -39,6 +40,12 @@ std::string Hdl64Packet(size_t lasers) {
 }
 
 }  // namespace
+
+// The HDL-64E-without-db.xml notice would be printed for every input.
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  ave::log::MinLevel() = ave::log::Level::kWARNING;
+  return 0;
+}
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (size < 1) return 0;

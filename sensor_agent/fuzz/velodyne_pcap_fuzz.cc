@@ -13,6 +13,7 @@
 
 #include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
+#include "model_store/common/log.h"
 #include "sensor_agent/fuzz/sweep_checks.h"
 #include "sensor_agent/lidar/lidar_source.h"
 #include "sensor_agent/lidar/pcap_reader.h"
@@ -56,6 +57,12 @@ size_t ExpectedPoints(const std::string& bytes) {
 }
 
 }  // namespace
+
+// The HDL-64E-without-db.xml notice would be printed for every input.
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  ave::log::MinLevel() = ave::log::Level::kWARNING;
+  return 0;
+}
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const std::string bytes(reinterpret_cast<const char*>(data), size);

@@ -8,8 +8,15 @@
 #include <string>
 #include <vector>
 
+#include "model_store/common/log.h"
 #include "sensor_agent/fuzz/sweep_checks.h"
 #include "sensor_agent/lidar/velodyne_decoder.h"
+
+// The HDL-64E-without-db.xml notice would be printed for every input.
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  ave::log::MinLevel() = ave::log::Level::kWARNING;
+  return 0;
+}
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using ave::lidar::VelodyneModel;
