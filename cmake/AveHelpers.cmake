@@ -42,6 +42,21 @@ function(ave_test name)
   endif()
 endfunction()
 
+# ave_fuzzer(NAME SRCS ... DEPS ...): a libFuzzer target (only with -DAVE_FUZZ=ON and clang) in
+# <build>/fuzz. The SRCS are the code under test, compiled into the target with AddressSanitizer
+# (+ LeakSanitizer) and UndefinedBehaviorSanitizer; the DEPS (Debian's and our own libraries) are not.
+# Used by fusion_server/fuzz/ and sensor_agent/fuzz/ (each stays within its component's layering).
+set(AVE_FUZZ_FLAGS -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined -g -O1)
+function(ave_fuzzer name)
+  cmake_parse_arguments(ARG "" "" "SRCS;DEPS" ${ARGN})
+  add_executable(${name} ${ARG_SRCS})
+  set_target_properties(${name} PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${CMAKE_BINARY_DIR}/fuzz)
+  target_include_directories(${name} PRIVATE ${PROJECT_SOURCE_DIR})
+  target_compile_options(${name} PRIVATE ${AVE_FUZZ_FLAGS})
+  target_link_options(${name} PRIVATE ${AVE_FUZZ_FLAGS})
+  target_link_libraries(${name} PRIVATE ${ARG_DEPS})
+endfunction()
+
 # ave_write_link_graph(FILE): one line per target this project defines, tab-separated:
 #   <target> <its folder, relative to the project> <direct link items> <sources>
 # (lists ;-separated). tests/layering_test.py reads it to check that no model_store/ or

@@ -9,13 +9,23 @@ build=${AVE_FUZZ_BUILD:-$root/build-fuzz}
 seconds=${AVE_FUZZ_SECONDS:-20}
 CC=clang-14 CXX=clang++-14 cmake -S "$root" -B "$build" -G Ninja -DAVE_FUZZ=ON -DAVE_BUILD_TESTS=OFF \
   -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
-targets=(jpeg_header sensor_message mesh_blob scene_file grpc_services las_reader)
+targets=(jpeg_header sensor_message mesh_blob scene_file grpc_services las_reader velodyne_pcap velodyne_udp velodyne_calibration)
+# Each target's seeds live beside its source: <component>/fuzz/corpus/<target>.
+corpus_dirs=(fusion_server/fuzz/corpus sensor_agent/fuzz/corpus)
 cmake --build "$build" --target "${targets[@]/#/ave_fuzz_}"
 for t in "${targets[@]}"; do
   work=$build/fuzz/corpus-$t
   mkdir -p "$work"
+  seeds=""
+  for d in "${corpus_dirs[@]}"; do
+    if [[ -d "$root/$d/$t" ]]; then seeds=$root/$d/$t; fi
+  done
+  if [[ -z "$seeds" ]]; then
+    echo "fuzz: no seed corpus for $t under ${corpus_dirs[*]}" >&2
+    exit 1
+  fi
   echo "fuzz: $t for $seconds s"
   (cd "$build/fuzz" && nice -n 19 "./ave_fuzz_$t" -max_total_time="$seconds" -rss_limit_mb=2048 -print_final_stats=1 \
-    "$work" "$root/fusion_server/fuzz/corpus/$t" 2>&1 | grep -E "^(stat::number_of_executed_units|Done|==[0-9]+==ERROR|SUMMARY)" )
+    "$work" "$seeds" 2>&1 | grep -E "^(stat::number_of_executed_units|Done|==[0-9]+==ERROR|SUMMARY)" )
 done
 echo "fuzz: no findings"

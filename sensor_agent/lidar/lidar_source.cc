@@ -276,14 +276,22 @@ absl::StatusOr<std::unique_ptr<LidarSource>> OpenLidarSource(const std::string& 
     return std::make_unique<SimLidarSource>(std::move(found->first), lidar, options);
   }
   if (StartsWith(spec, "pcap:")) {
-    absl::StatusOr<VelodyneDecoderOptions> decoder = DecoderOptions(options);
-    if (!decoder.ok()) return decoder.status();
     absl::StatusOr<std::unique_ptr<PcapReader>> reader = PcapReader::Open(spec.substr(5));
     if (!reader.ok()) return reader.status();
-    return std::make_unique<PcapLidarSource>(*std::move(reader), *decoder, options);
+    return OpenPcapLidarSource(*std::move(reader), options);
   }
   if (StartsWith(spec, "udp:")) return OpenUdp(spec, options);
   return absl::InvalidArgumentError(absl::StrCat("source '", spec, "': not a LiDAR source (sim:SCENARIO#LIDAR, pcap:FILE, udp:[ADDR:]PORT)"));
+}
+
+absl::StatusOr<std::unique_ptr<LidarSource>> OpenPcapLidarSource(std::unique_ptr<PcapReader> reader, const LidarSourceOptions& options) {
+  const std::string spec = "pcap:" + reader->path();
+  if (const std::string why = options.Check(); !why.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat("source '", spec, "': ", why));
+  }
+  absl::StatusOr<VelodyneDecoderOptions> decoder = DecoderOptions(options);
+  if (!decoder.ok()) return decoder.status();
+  return std::make_unique<PcapLidarSource>(std::move(reader), *decoder, options);
 }
 
 }  // namespace ave::lidar

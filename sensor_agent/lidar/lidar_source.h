@@ -58,6 +58,10 @@ absl::StatusOr<bool> IsLidarSourceSpec(const std::string& spec);
 
 absl::StatusOr<std::unique_ptr<LidarSource>> OpenLidarSource(const std::string& spec, const LidarSourceOptions& options);
 
+class PcapReader;
+// What pcap:FILE opens, for a reader opened elsewhere (PcapReader::FromBytes: tests, the fuzzer).
+absl::StatusOr<std::unique_ptr<LidarSource>> OpenPcapLidarSource(std::unique_ptr<PcapReader> reader, const LidarSourceOptions& options);
+
 // Process-wide (for executables, not libraries): keeps freed blocks of up to 64 MiB in the heap
 // instead of handing them back to the kernel. A sweep's points are one ~4 MB block (HDL-64E);
 // with glibc's defaults each new sweep page-faults it in again, which costs ~40 % of the decode

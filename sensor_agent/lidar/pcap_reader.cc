@@ -32,6 +32,18 @@ absl::StatusOr<std::unique_ptr<PcapReader>> PcapReader::Open(const std::string& 
   return r;
 }
 
+absl::StatusOr<std::unique_ptr<PcapReader>> PcapReader::FromBytes(std::string bytes, const std::string& name) {
+  // fmemopen refuses a zero-sized buffer: say what an empty file would.
+  if (bytes.empty()) return absl::InvalidArgumentError(absl::StrCat(name, ": global header: 0 of 24 bytes (empty or not a pcap file)"));
+  std::unique_ptr<PcapReader> r(new PcapReader());
+  r->path_ = name;
+  r->bytes_ = std::move(bytes);
+  r->file_.reset(fmemopen(r->bytes_.data(), r->bytes_.size(), "rb"));
+  if (!r->file_) return absl::InternalError(absl::StrCat(name, ": fmemopen failed"));
+  if (absl::Status s = r->Rewind(); !s.ok()) return s;
+  return r;
+}
+
 absl::Status PcapReader::Rewind() {
   std::rewind(file_.get());
   index_ = 0;

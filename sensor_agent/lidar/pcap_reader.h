@@ -26,6 +26,8 @@ struct PcapRecord {
 class PcapReader {
  public:
   static absl::StatusOr<std::unique_ptr<PcapReader>> Open(const std::string& path);
+  // A capture already in memory (a fuzz input, a download); `name` stands for the path in errors.
+  static absl::StatusOr<std::unique_ptr<PcapReader>> FromBytes(std::string bytes, const std::string& name);
 
   // The next record; false at the end of the file. A record cut short (a truncated file) is an
   // error naming its index.
@@ -41,6 +43,7 @@ class PcapReader {
   std::string path_;
   std::unique_ptr<FILE, int (*)(FILE*)> file_{nullptr, &std::fclose};
   std::vector<char> io_buffer_;
+  std::string bytes_;  // FromBytes: the capture the FILE reads (fmemopen)
   std::vector<uint8_t> record_;
   bool swapped_ = false;
   bool nanoseconds_ = false;

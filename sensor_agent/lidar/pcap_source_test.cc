@@ -14,6 +14,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "sensor_agent/lidar/lidar_source.h"
+#include "sensor_agent/lidar/pcap_reader.h"
 #include "sensor_agent/lidar/velodyne_test_packets.h"
 #include "sensor_agent/sim/rotating_lidar.h"
 #include "sensor_agent/sim/scenario.h"
@@ -113,6 +114,49 @@ TEST(PcapLidarSource, TruncatedFileKeepsTheSweepsBeforeAndNamesThePacket) {
   EXPECT_EQ(sweeps[2].points.size(), 24u);
   EXPECT_EQ(end.code(), absl::StatusCode::kDataLoss);
   EXPECT_THAT(std::string(end.message()), HasSubstr(path + ": packet 9: record truncated (584 of 1248 bytes)"));
+}
+
+TEST(PcapLidarSource, CaptureInMemoryDecodesAsTheFileDoesAndNamesItsPackets) {
+  const std::string dir = TempDir("memory");
+  TestPcapWriter w({.big_endian = true, .nanoseconds = true});
+  int64_t t_ns = 1'700'000'000'000'000'000;
+  for (const std::string& p : Vlp16Revolutions(2)) w.Udp(p, t_ns += 33'000'000);
+  const std::string path = dir + "/c.pcap";
+  ASSERT_TRUE(w.Write(path));
+  auto from_file = OpenLidarSource("pcap:" + path, {});
+  ASSERT_TRUE(from_file.ok()) << from_file.status();
+  const std::vector<LidarSweep> file_sweeps = DrainOk(**from_file);
+
+  auto reader = PcapReader::FromBytes(w.bytes(), "mem.pcap");
+  ASSERT_TRUE(reader.ok()) << reader.status();
+  auto from_memory = OpenPcapLidarSource(*std::move(reader), {});
+  ASSERT_TRUE(from_memory.ok()) << from_memory.status();
+  EXPECT_EQ((*from_memory)->description(), "pcap:mem.pcap");
+  absl::Status end;
+  const std::vector<LidarSweep> memory_sweeps = DrainOk(**from_memory, &end);
+  EXPECT_TRUE(absl::IsOutOfRange(end)) << end;
+  ASSERT_EQ(memory_sweeps.size(), 2u);
+  ASSERT_EQ(file_sweeps.size(), 2u);
+  for (size_t i = 0; i < 2; ++i) {
+    EXPECT_EQ(memory_sweeps[i].t_ns, file_sweeps[i].t_ns);
+    ASSERT_EQ(memory_sweeps[i].points.size(), file_sweeps[i].points.size());
+    for (size_t k = 0; k < file_sweeps[i].points.size(); ++k) {
+      EXPECT_EQ(memory_sweeps[i].points[k].p_in_sensor, file_sweeps[i].points[k].p_in_sensor);
+    }
+  }
+
+  // Cut inside the fourth record: the first revolution, what packet 3 held, then packet 4 named.
+  auto cut = PcapReader::FromBytes(w.bytes().substr(0, 24 + 3 * (16 + 42 + 1206) + 100), "mem.pcap");
+  ASSERT_TRUE(cut.ok()) << cut.status();
+  auto cut_source = OpenPcapLidarSource(*std::move(cut), {});
+  ASSERT_TRUE(cut_source.ok()) << cut_source.status();
+  const std::vector<LidarSweep> cut_sweeps = DrainOk(**cut_source, &end);
+  EXPECT_EQ(cut_sweeps.size(), 1u);
+  EXPECT_THAT(std::string(end.message()), HasSubstr("mem.pcap: packet 4: record truncated"));
+
+  auto empty = PcapReader::FromBytes("", "empty.pcap");
+  ASSERT_FALSE(empty.ok());
+  EXPECT_THAT(std::string(empty.status().message()), HasSubstr("empty.pcap: global header: 0 of 24 bytes"));
 }
 
 TEST(PcapLidarSource, CorruptedHdl64PacketNamesFilePacketBlockAndFlag) {

@@ -36,14 +36,22 @@ double DefaultMaxRange(VelodyneModel model) { return model == VelodyneModel::kHd
 
 }  // namespace
 
-VelodyneDecoder::VelodyneDecoder(VelodyneDecoderOptions options) : options_(std::move(options)) {
-  sin_cdeg_.resize(36000);
-  cos_cdeg_.resize(36000);
-  for (int i = 0; i < 36000; ++i) {
-    sin_cdeg_[i] = std::sin(i * kPi / 18000);
-    cos_cdeg_[i] = std::cos(i * kPi / 18000);
-  }
+// Per 0.01° of azimuth; built once per process (576 KB), shared by every decoder.
+const VelodyneDecoder::SinCosTable& VelodyneDecoder::Table() {
+  static const SinCosTable table = [] {
+    SinCosTable t;
+    t.sin.resize(36000);
+    t.cos.resize(36000);
+    for (int i = 0; i < 36000; ++i) {
+      t.sin[i] = std::sin(i * kPi / 18000);
+      t.cos[i] = std::cos(i * kPi / 18000);
+    }
+    return t;
+  }();
+  return table;
 }
+
+VelodyneDecoder::VelodyneDecoder(VelodyneDecoderOptions options) : options_(std::move(options)), table_(&Table()) {}
 
 absl::Status VelodyneDecoder::Configure(const uint8_t* payload) {
   bool lower = false;
@@ -159,8 +167,8 @@ VelodyneDecoder::FiringAzimuth VelodyneDecoder::Azimuth(double azimuth_cdeg) con
   az.rad = azimuth_cdeg * (kPi / 18000);
   const int whole = static_cast<int>(azimuth_cdeg);
   if (whole == azimuth_cdeg) {
-    az.sin = sin_cdeg_[whole];
-    az.cos = cos_cdeg_[whole];
+    az.sin = table_->sin[whole];
+    az.cos = table_->cos[whole];
   } else {
     az.sin = std::sin(az.rad);
     az.cos = std::cos(az.rad);

@@ -77,7 +77,11 @@ class VelodyneDecoder {
   };
   std::vector<LaserTable> lasers_;
   std::vector<float> ring_elevation_rad_;
-  std::vector<double> sin_cdeg_, cos_cdeg_;  // per 0.01° of azimuth
+  struct SinCosTable {
+    std::vector<double> sin, cos;
+  };
+  static const SinCosTable& Table();
+  const SinCosTable* table_;  // sin and cos per 0.01° of azimuth
   std::optional<LidarSweep> sweep_;
   double last_firing_cdeg_ = -1;
   int firings_in_sweep_ = 0;
