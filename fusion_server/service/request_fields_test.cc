@@ -54,6 +54,14 @@ const std::set<std::string>& CoveredFields() {
       "ave.v1.Camera.source_url", "ave.v1.Camera.enabled",
       "ave.v1.IssueTokenRequest.role", "ave.v1.IssueTokenRequest.camera_id", "ave.v1.IssueTokenRequest.label",
       "ave.v1.RevokeTokenRequest.token_id",
+      // Issue 16: rotating LiDARs (LidarFieldsAreRefusedByNameWithTheSensor below).
+      "ave.v1.Camera.kind", "ave.v1.SensorHello.kind", "ave.v1.SensorMessage.lidar_sweep",
+      "ave.v1.LidarSweepFrame.sequence", "ave.v1.LidarSweepFrame.capture_time_ns",
+      "ave.v1.LidarSweepFrame.clock_offset_ns", "ave.v1.LidarSweepFrame.world_from_sensor",
+      "ave.v1.LidarSweepFrame.tracks", "ave.v1.LidarSweepFrame.foreground",
+      "ave.v1.FootTrack.track_id", "ave.v1.FootTrack.position", "ave.v1.FootTrack.velocity_x_mps",
+      "ave.v1.FootTrack.velocity_y_mps", "ave.v1.FootTrack.covariance", "ave.v1.FootTrack.age_sweeps",
+      "ave.v1.LidarPoints.count", "ave.v1.LidarPoints.packed", "ave.v1.SubscribeRequest.include_lidar_points",
   };
   return fields;
 }
@@ -530,6 +538,150 @@ TEST_F(RequestFieldsTest, AdminRemoveAndTokenFieldsAreRefusedByName) {
     s = revoke(id);
     EXPECT_EQ(s.error_code(), code) << s.error_message();
     EXPECT_THAT(s.error_message(), HasSubstr(names));
+  }
+}
+
+// Issue 16: every field a rotating LiDAR sends, refused by name with the sensor, and nothing of a
+// refused sweep kept (the server answers with the stream's end, never an ack).
+TEST_F(RequestFieldsTest, LidarFieldsAreRefusedByNameWithTheSensor) {
+  v1::Camera lidar;
+  lidar.set_id("l");
+  lidar.set_name("LiDAR");
+  lidar.set_kind(v1::SENSOR_KIND_ROTATING_LIDAR);
+  *lidar.mutable_mounting_pose() = ToProto(Rigid3d(Eigen::Quaterniond::Identity(), Eigen::Vector3d(1, 2, 2)));
+  lidar.set_enabled(true);
+  v1::Camera unknown_kind = lidar;
+  unknown_kind.set_id("k");
+  unknown_kind.set_kind(static_cast<v1::SensorKind>(99));
+  grpc::Status s = AddCamera(unknown_kind);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << s.error_message();
+  EXPECT_THAT(s.error_message(), HasSubstr("camera.kind 99"));
+  ASSERT_TRUE(AddCamera(lidar).ok());
+
+  auto stream = [&](const v1::SensorHello& hello, const v1::SensorMessage& second, int* acks) {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+    auto st = sensor_->Stream(&context);
+    v1::SensorMessage m;
+    *m.mutable_hello() = hello;
+    st->Write(m);
+    *acks = 0;
+    if (st->Write(second)) {
+      v1::SensorAck ack;
+      if (st->Read(&ack)) ++*acks;
+    }
+    st->WritesDone();
+    return st->Finish();
+  };
+  v1::SensorHello hello;
+  hello.set_camera_id("l");
+  hello.set_token(kSensor);
+  hello.set_kind(v1::SENSOR_KIND_ROTATING_LIDAR);
+  auto sweep = [] {
+    v1::LidarSweepFrame f;
+    f.set_sequence(1);
+    f.set_capture_time_ns(1'700'000'000'000'000'000);
+    *f.mutable_world_from_sensor() = ToProto(Rigid3d(Eigen::Quaterniond::Identity(), Eigen::Vector3d(1, 2, 2)));
+    v1::FootTrack* t = f.add_tracks();
+    t->set_track_id(3);
+    t->mutable_position()->set_x(4);
+    t->mutable_position()->set_y(5);
+    t->set_age_sweeps(7);
+    for (float c : {0.01f, 0.0f, 0.01f}) t->add_covariance(c);
+    f.mutable_foreground()->set_count(1);
+    f.mutable_foreground()->set_packed(std::string("\x64\x00\x00\x00\x00\x00\x01\x00", 8));
+    return f;
+  };
+  int acks = -1;
+  {  // The good sweep is acked: each case below changes one field of it.
+    v1::SensorMessage m;
+    *m.mutable_lidar_sweep() = sweep();
+    s = stream(hello, m, &acks);
+    EXPECT_TRUE(s.ok()) << s.error_message();
+    EXPECT_EQ(acks, 1);
+  }
+  {  // SensorHello.kind: a kind nobody knows; a camera hello for the LiDAR; a LiDAR sweep on a camera stream.
+    v1::SensorHello bad = hello;
+    bad.set_kind(static_cast<v1::SensorKind>(42));
+    v1::SensorMessage m;
+    *m.mutable_lidar_sweep() = sweep();
+    s = stream(bad, m, &acks);
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << s.error_message();
+    EXPECT_THAT(s.error_message(), HasSubstr("hello.kind 42"));
+    m.mutable_lidar_sweep()->set_sequence(2);
+    s = stream(Hello(), m, &acks);  // camera 'a' sends a LiDAR sweep
+    EXPECT_FALSE(s.ok());
+    EXPECT_THAT(s.error_message(), HasSubstr("camera 'a': not a frame"));
+    EXPECT_EQ(acks, 0);
+  }
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const std::vector<std::tuple<const char*, std::function<void(v1::LidarSweepFrame&)>, grpc::StatusCode, const char*>> cases = {
+      {"sequence", [](auto& f) { f.set_sequence(0); }, grpc::StatusCode::INVALID_ARGUMENT, "sequence must increase"},
+      {"capture_time_ns", [](auto& f) { f.set_capture_time_ns(-1); }, grpc::StatusCode::INVALID_ARGUMENT, "capture_time_ns"},
+      {"clock_offset_ns", [](auto& f) { f.set_clock_offset_ns(std::numeric_limits<int64_t>::max()); },
+       grpc::StatusCode::INVALID_ARGUMENT, "clock_offset_ns"},
+      {"world_from_sensor", [=](auto& f) { f.mutable_world_from_sensor()->mutable_position()->set_z(nan); },
+       grpc::StatusCode::INVALID_ARGUMENT, "world_from_sensor"},
+      {"tracks count",
+       [](auto& f) {
+         for (uint32_t i = 0; i < 5000; ++i) {
+           v1::FootTrack* t = f.add_tracks();
+           *t = f.tracks(0);
+           t->set_track_id(100 + i);
+         }
+       },
+       grpc::StatusCode::INVALID_ARGUMENT, "tracks (at most"},
+      {"track_id 0", [](auto& f) { f.mutable_tracks(0)->set_track_id(0); }, grpc::StatusCode::INVALID_ARGUMENT,
+       "tracks[0].track_id must be > 0"},
+      {"track_id twice", [](auto& f) { *f.add_tracks() = f.tracks(0); }, grpc::StatusCode::INVALID_ARGUMENT,
+       "track_id 3 appears twice"},
+      {"position", [](auto& f) { f.mutable_tracks(0)->mutable_position()->set_y(INFINITY); },
+       grpc::StatusCode::INVALID_ARGUMENT, "tracks[0].position"},
+      {"velocity_x_mps", [=](auto& f) { f.mutable_tracks(0)->set_velocity_x_mps(nan); }, grpc::StatusCode::INVALID_ARGUMENT,
+       "tracks[0].velocity"},
+      {"velocity_y_mps", [](auto& f) { f.mutable_tracks(0)->set_velocity_y_mps(1e9); }, grpc::StatusCode::INVALID_ARGUMENT,
+       "tracks[0].velocity"},
+      {"covariance count", [](auto& f) { f.mutable_tracks(0)->add_covariance(0); }, grpc::StatusCode::INVALID_ARGUMENT,
+       "tracks[0].covariance must have 3 values"},
+      {"covariance value", [=](auto& f) { f.mutable_tracks(0)->set_covariance(1, nan); }, grpc::StatusCode::INVALID_ARGUMENT,
+       "tracks[0].covariance must be finite"},
+      {"covariance not PSD", [](auto& f) { f.mutable_tracks(0)->set_covariance(0, -1); }, grpc::StatusCode::INVALID_ARGUMENT,
+       "not positive semi-definite"},
+      {"foreground.count", [](auto& f) { f.mutable_foreground()->set_count(1u << 30); }, grpc::StatusCode::RESOURCE_EXHAUSTED,
+       "foreground.count"},
+      {"foreground.packed", [](auto& f) { f.mutable_foreground()->set_packed("123"); }, grpc::StatusCode::INVALID_ARGUMENT,
+       "foreground.packed is 3 bytes"},
+  };
+  for (const auto& [what, mutate, code, names] : cases) {
+    SCOPED_TRACE(what);
+    v1::SensorMessage m;
+    *m.mutable_lidar_sweep() = sweep();
+    m.mutable_lidar_sweep()->set_sequence(1000);
+    mutate(*m.mutable_lidar_sweep());
+    s = stream(hello, m, &acks);
+    EXPECT_EQ(s.error_code(), code) << s.error_message();
+    EXPECT_THAT(s.error_message(), HasSubstr(names));
+    EXPECT_THAT(s.error_message(), HasSubstr("lidar 'l': sweep "));
+    EXPECT_EQ(acks, 0);
+  }
+  // age_sweeps is informative: every value is accepted.
+  v1::SensorMessage m;
+  *m.mutable_lidar_sweep() = sweep();
+  m.mutable_lidar_sweep()->set_sequence(2000);
+  m.mutable_lidar_sweep()->mutable_tracks(0)->set_age_sweeps(std::numeric_limits<uint32_t>::max());
+  s = stream(hello, m, &acks);
+  EXPECT_TRUE(s.ok()) << s.error_message();
+  EXPECT_EQ(acks, 1);
+  // SubscribeRequest.include_lidar_points, a bool, accepts both values; true brings the points.
+  for (const bool points : {false, true}) {
+    v1::SubscribeRequest request;
+    request.set_viewer_id("fields");
+    request.set_include_lidar_points(points);
+    v1::SceneUpdate update;
+    s = Subscribe(request, &update);
+    ASSERT_TRUE(s.ok()) << s.error_message();
+    ASSERT_EQ(update.lidars_size(), 1);
+    EXPECT_EQ(update.lidars(0).foreground().count(), points ? 1u : 0u);
   }
 }
 
