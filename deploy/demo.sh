@@ -24,11 +24,11 @@ export AVE_VIEWER_TOKEN=${AVE_VIEWER_TOKEN:-$(token)}
 export AVE_ADMIN_TOKEN=${AVE_ADMIN_TOKEN:-$(token)}
 
 certs=$out/certs
-# Issue 16: AVE_DEMO_ROTATING_LIDAR=1 adds the campus's rotating LiDAR 'hdl' (a tripod on the lawn
-# south-east of the plaza) as a fourth sensor, streaming foot tracks and labelled points. Off by
-# default until ave-agent has its LiDAR mode (the sweep source of sensor_agent/lidar/ and the people
-# tracker of sensor_agent/lidar_track/ into StreamLidar, sensor_agent/stream/lidar_streamer.h).
-lidar_demo=${AVE_DEMO_ROTATING_LIDAR:-0}
+# Issue 16: the campus's rotating LiDAR 'hdl' (a tripod on the lawn south-east of the plaza) is a
+# fourth sensor: its agent tracks people in the simulated sweeps (sensor_agent/lidar_track) and
+# streams their foot tracks and points; the server fuses them with the cameras' objects.
+# AVE_DEMO_ROTATING_LIDAR=0 leaves it out.
+lidar_demo=${AVE_DEMO_ROTATING_LIDAR:-1}
 sensors="cam1 cam2 cam3"
 [ "$lidar_demo" = 1 ] && sensors="$sensors hdl"
 # shellcheck disable=SC2086
@@ -93,6 +93,22 @@ if [ "$lidar_demo" = 1 ]; then
   echo "demo: the rotating LiDAR agent (hdl) streaming foot tracks and points"
 fi
 
+metrics_port=$(sed -n 's/^metrics on port \([0-9]*\)$/\1/p' "$out/server.out" | head -1)
+if [ "$lidar_demo" = 1 ] && [ -n "$metrics_port" ]; then
+  # The LiDAR agent first builds its simulated sensor: wait (up to a minute) until the server has
+  # taken its first sweep, so the viewer's first picture has the LiDAR's people in it.
+  python3 - "http://127.0.0.1:$metrics_port/metrics" <<'PY' || echo "demo: the LiDAR has sent no sweep yet; going on"
+import re, sys, time, urllib.request
+for _ in range(600):
+    text = urllib.request.urlopen(sys.argv[1], timeout=5).read().decode()
+    m = re.search(r"^ave_lidar_sweeps_in_total (\d+)$", text, re.M)
+    if m and int(m.group(1)) > 0:
+        sys.exit(0)
+    time.sleep(0.1)
+sys.exit(1)
+PY
+fi
+
 if [ -n "${DISPLAY:-}" ] && [ "${AVE_DEMO_HEADLESS:-0}" != 1 ]; then
   echo "demo: opening the viewer window (close it to stop)"
   # Waits for the first frames so the window opens on live video.
@@ -106,7 +122,6 @@ else
 fi
 echo "demo: quad view written to $out/quad.png"
 "$bin/ave-admin" --server "$server" list >"$out/cameras.json"
-metrics_port=$(sed -n 's/^metrics on port \([0-9]*\)$/\1/p' "$out/server.out" | head -1)
 if [ -n "$metrics_port" ]; then
   python3 -c "import sys, urllib.request; sys.stdout.write(urllib.request.urlopen(sys.argv[1], timeout=5).read().decode())" \
     "http://127.0.0.1:$metrics_port/metrics" >"$out/metrics.txt" || true

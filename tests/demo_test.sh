@@ -19,16 +19,20 @@ assert (w, h) == (1280, 720), f'quad view is {w}x{h}, expected 1280x720'
 print(f'quad.png {w}x{h}')
 PY
 n=$(grep -c '"id"' "$out/cameras.json")
-[ "$n" = 3 ] || { echo "FAIL: $n cameras registered"; exit 1; }
+[ "$n" = 4 ] || { echo "FAIL: $n sensors registered (3 cameras and the LiDAR expected)"; exit 1; }
 for cam in cam1 cam2 cam3; do
   grep -q "camera '$cam' connected" "$out/server.log" || { echo "FAIL: $cam never connected"; exit 1; }
 done
+# Issue 16: the rotating LiDAR's agent tracked people and the server took its sweeps.
+grep -q "lidar 'hdl' connected" "$out/server.log" || { echo "FAIL: the LiDAR agent never connected"; exit 1; }
 grep -q "ave-server stopped" "$out/server.log" || { echo "FAIL: server did not stop cleanly"; exit 1; }
 # Issue 8: the demo runs over TLS, sensors with their own camera-bound tokens, metrics exported.
 grep -q "listening on port [0-9]* (TLS)" "$out/server.log" || { echo "FAIL: the demo server is not serving TLS"; exit 1; }
 grep -q "IssueToken" "$out/server.log" || { echo "FAIL: no per-camera sensor token was issued"; exit 1; }
 frames=$(sed -n 's/^ave_frames_in_total \([0-9]*\)$/\1/p' "$out/metrics.txt" 2>/dev/null)
 [ "${frames:-0}" -gt 0 ] || { echo "FAIL: metrics show no frames in (metrics.txt: $(head -c 200 "$out/metrics.txt" 2>/dev/null))"; exit 1; }
+sweeps=$(sed -n 's/^ave_lidar_sweeps_in_total \([0-9]*\)$/\1/p' "$out/metrics.txt" 2>/dev/null)
+[ "${sweeps:-0}" -gt 0 ] || { echo "FAIL: metrics show no LiDAR sweeps in"; exit 1; }
 if pgrep -f "$out/ave.db" >/dev/null; then echo "FAIL: a demo process is still running"; exit 1; fi
 # The window path: the same viewer in a GLFW window under a virtual X display, closing itself after
 # a few frames and writing its last frame.
