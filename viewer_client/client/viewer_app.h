@@ -59,6 +59,9 @@ std::vector<View> QuadViews(int width, int height, const View& browse, const std
                             const std::vector<std::string>& locked);
 // The frusta the server should select cameras by: every view's clip-from-local matrix.
 SelectionViews SelectionOf(const std::vector<View>& views);
+// Every LiDAR's newest sweep of people points in one cloud for Renderer::SetPointCloud, coloured by
+// track id (IdColor: a person keeps its colour from sweep to sweep; grey for unassigned points).
+PointCloud LidarPointsByTrack(const std::vector<LidarView>& lidars);
 // Writes RGBA8 rows-top-first pixels as a PNG.
 absl::Status WritePng(const std::string& path, const std::vector<uint8_t>& rgba, int width, int height);
 
