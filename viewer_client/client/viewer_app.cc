@@ -177,6 +177,7 @@ class Session {
         browse_(options.eye, options.target) {
     state_.frustums = options.draw_frustums;
     state_.select_data = options.select_data;
+    state_.lidar_points = options.lidar_points;
     state_.selected_camera = options.selected_camera;
     state_.display = renderer.options().display;
     for (size_t i = 0; i < options.locked_cameras.size() && i < 3; ++i) state_.locked[i] = options.locked_cameras[i];

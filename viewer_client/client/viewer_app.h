@@ -36,6 +36,7 @@ struct ViewerOptions {
   bool draw_frustums = true;
   bool panel = true;        // the on-screen panel and annotations (ImGui)
   bool select_data = true;  // data selection: frames only of cameras whose frustum meets a view
+  bool lidar_points = true;  // the LiDAR point layer (key n) at start; off: no points subscribed
   int max_frames = 0;  // window: close after this many frames (0 = until the user closes it); headless: frames to draw (0 = 1)
   // TLS to the server (issue 8): PEM CA of the server certificate (empty = plaintext), and an
   // optional client certificate and key for mutual TLS.
