@@ -13,6 +13,7 @@
 #include <atomic>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <thread>
 
 #include <gtest/gtest.h>
@@ -203,6 +204,25 @@ TEST(LidarEndToEnd, PersonSeenByCameraAndLidarIsOneObjectListingBothNearTheTruth
   reader->Finish();
   const std::vector<viewer::LidarView> client_lidars = client.Lidars();
   const std::vector<viewer::ObjectView> client_objects = client.Objects();
+  // The viewer's point layer switched off: the client subscribes again without points and drops
+  // them while the LiDAR's sweeps keep arriving; switched on, points come back.
+  auto wait_for = [&](const std::function<bool(const viewer::LidarView&)>& done) {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+    while (std::chrono::steady_clock::now() < deadline) {
+      const std::vector<viewer::LidarView> now = client.Lidars();
+      if (now.size() == 1 && done(now.front())) return true;
+      client.WaitUntil([](const auto&) { return false; }, std::chrono::milliseconds(50));
+    }
+    return false;
+  };
+  const uint64_t subscriptions = client.subscriptions();
+  const uint64_t sweep_before_off = client_lidars.empty() ? 0 : client_lidars.front().sweep_sequence;
+  client.SetIncludeLidarPoints(false);
+  const bool dropped = wait_for([&](const viewer::LidarView& l) {
+    return client.subscriptions() > subscriptions && l.points == nullptr && l.sweep_sequence > sweep_before_off;
+  });
+  client.SetIncludeLidarPoints(true);
+  const bool back = wait_for([](const viewer::LidarView& l) { return l.points != nullptr; });
   client.Stop();
   stop = true;
   camera_agent.join();
@@ -243,6 +263,8 @@ TEST(LidarEndToEnd, PersonSeenByCameraAndLidarIsOneObjectListingBothNearTheTruth
     // A person's points lie within a body's reach of its foot point (people are ~0.5 m wide).
     EXPECT_LT((lidar.points->p_local[k].head<2>().cast<double>() - track->position.head<2>()).norm(), 1.0);
   }
+  EXPECT_TRUE(dropped) << "points still held (or no new sweep) 20 s after the layer went off";
+  EXPECT_TRUE(back) << "no points 20 s after the layer came back on";
   EXPECT_TRUE(std::any_of(client_objects.begin(), client_objects.end(), [&](const viewer::ObjectView& o) {
     return std::count(o.sensor_ids.begin(), o.sensor_ids.end(), spec.id) > 0 && o.kind == 1;
   }));

@@ -61,6 +61,8 @@ int main(int argc, char** argv) {
   app.add_option("--frames", options.max_frames, "window: close after N frames (0 = when closed); headless: draw N frames");
   app.add_flag("!--no-frustums", options.draw_frustums, "do not draw camera frustums");
   app.add_flag("!--no-panel", options.panel, "no on-screen panel or labels");
+  app.add_flag("!--no-lidar-points", options.lidar_points,
+               "start with the LiDAR point layer off (key n; the server then sends no points)");
   app.add_flag("!--no-select", options.select_data,
                "ask for every camera's frames (default: only cameras whose frustum meets a view)");
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-viewer")) return *exit_code;

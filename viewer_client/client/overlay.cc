@@ -344,6 +344,7 @@ void Overlay::Panel(const std::vector<CameraView>& cameras, const OverlayStats& 
     ImGui::SameLine();
     ImGui::Checkbox("labels", &state.annotations);
     ImGui::Checkbox("data selection (frames in view only)", &state.select_data);
+    if (!lidars.empty()) ImGui::Checkbox("LiDAR points (by track)", &state.lidar_points);
   }
   if (ImGui::CollapsingHeader("Cameras", ImGuiTreeNodeFlags_DefaultOpen)) {
     // One row per camera: status dot, name (click: select), lock buttons, and its time line (one

@@ -28,6 +28,9 @@ struct OverlayState {
   bool annotations = true;
   bool panel = true;
   bool select_data = true;  // data selection: ask the server for frames of cameras in view only
+  // The LiDARs' newest sweep of people points, coloured by track (issue 16); the subscription asks
+  // for points only while this is on. The toggle shows once a LiDAR is registered.
+  bool lidar_points = true;
   std::string selected_camera;                  // highlighted in every view
   std::array<std::string, 3> locked;            // cameras of the three locked views ("" = plan view)
 };

@@ -143,6 +143,10 @@ void SceneClient::Start(const SubscribeOptions& options) {
   Stop();
   stop_ = false;
   reselect_interval_ = options.reselect_interval;
+  {
+    std::lock_guard lock(mu_);
+    include_points_ = options.include_lidar_points;
+  }
   thread_ = std::thread([this, options] { Loop(options); });
 }
 
@@ -200,6 +204,15 @@ void SceneClient::SetViews(const SelectionViews& views) {
   if (!context_ || resubscribe_) return;  // not subscribed yet: the next Subscribe takes them
   if (std::chrono::steady_clock::now() - last_subscribe_ < reselect_interval_) return;
   if (!ViewsDifferALot(views, subscribed_views_)) return;
+  resubscribe_ = true;
+  static_cast<grpc::ClientContext*>(context_.get())->TryCancel();
+}
+
+void SceneClient::SetIncludeLidarPoints(bool include) {
+  std::lock_guard lock(mu_);
+  if (include == include_points_) return;
+  include_points_ = include;
+  if (!context_ || resubscribe_) return;  // the next Subscribe takes it
   resubscribe_ = true;
   static_cast<grpc::ClientContext*>(context_.get())->TryCancel();
 }
@@ -274,9 +287,16 @@ void SceneClient::Loop(SubscribeOptions options) {
     request.set_max_rate_hz(options.max_rate_hz);
     request.set_include_jpeg(options.include_jpeg);
     request.set_max_jpeg_width(options.max_jpeg_width);
-    request.set_include_lidar_points(options.include_lidar_points);
     {
       std::lock_guard lock(mu_);
+      options.include_lidar_points = include_points_;
+      request.set_include_lidar_points(include_points_);
+      if (!include_points_) {
+        for (auto& [id, lidar] : lidars_) {
+          if (lidar.points) lidar.points_serial = next_serial_++;
+          lidar.points.reset();
+        }
+      }
       context_ = context;
       resubscribe_ = false;
       subscribed_views_ = wanted_views_;

@@ -153,6 +153,10 @@ class SceneClient {
   // differ a lot from the subscribed ones and reselect_interval has passed since the last
   // subscription; call every frame, a change held back by the rate limit goes out on a later call.
   void SetViews(const SelectionViews& views);
+  // Whether the subscription asks for the LiDARs' points (the viewer's point layer is on);
+  // starts as SubscribeOptions::include_lidar_points. A change re-subscribes at once; turned off,
+  // every LiDAR's points are dropped (null) when the new subscription starts.
+  void SetIncludeLidarPoints(bool include);
   // The views the current subscription carries.
   SelectionViews subscribed_views() const;
   // The origin of the static model fetched (the local frame the views are in).
@@ -185,7 +189,8 @@ class SceneClient {
   std::map<std::string, LidarView> lidars_;
   SelectionViews wanted_views_, subscribed_views_;
   std::chrono::steady_clock::time_point last_subscribe_{};
-  bool resubscribe_ = false;  // the current subscription was cancelled to change views
+  bool resubscribe_ = false;  // the current subscription was cancelled to change views or points
+  bool include_points_ = true;  // wanted; the current subscription's is in Loop's options
   Eigen::Vector3d model_origin_ = Eigen::Vector3d::Zero();
   std::chrono::milliseconds reselect_interval_{500};
   std::atomic<uint64_t> jpeg_bytes_{0};

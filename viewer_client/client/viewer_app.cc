@@ -121,6 +121,20 @@ SelectionViews SelectionOf(const std::vector<View>& views) {
   return out;
 }
 
+PointCloud LidarPointsByTrack(const std::vector<LidarView>& lidars) {
+  PointCloud cloud;
+  cloud.point_size_px = 3;
+  for (const LidarView& lidar : lidars) {
+    if (!lidar.points) continue;
+    const LidarPointCloud& points = *lidar.points;
+    cloud.positions_local_m.insert(cloud.positions_local_m.end(), points.p_local.begin(), points.p_local.end());
+    for (size_t k = 0; k < points.p_local.size(); ++k) {
+      cloud.colors.push_back(IdColor(k < points.track_id.size() ? points.track_id[k] : 0));
+    }
+  }
+  return cloud;
+}
+
 absl::Status WritePng(const std::string& path, const std::vector<uint8_t>& rgba, int width, int height) {
   if (rgba.size() != size_t(width) * height * 4) return absl::InvalidArgumentError("WritePng: size mismatch");
   const cv::Mat in(height, width, CV_8UC4, const_cast<uint8_t*>(rgba.data()));
@@ -163,6 +177,7 @@ class Session {
         browse_(options.eye, options.target) {
     state_.frustums = options.draw_frustums;
     state_.select_data = options.select_data;
+    state_.lidar_points = options.lidar_points;
     state_.selected_camera = options.selected_camera;
     state_.display = renderer.options().display;
     for (size_t i = 0; i < options.locked_cameras.size() && i < 3; ++i) state_.locked[i] = options.locked_cameras[i];
@@ -197,6 +212,7 @@ class Session {
     UpdateSelection(first);
     for (auto& c : clients_) {
       c->Start({.camera_ids = options_.camera_filter, .max_rate_hz = options_.max_rate_hz, .include_jpeg = true,
+                .include_lidar_points = state_.lidar_points,
                 .decode_width = renderer_.options().video_layer_width,
                 .decode_height = renderer_.options().video_layer_height});
     }
@@ -306,6 +322,8 @@ class Session {
     }
     if (absl::Status s = renderer_.SetDynamicModels(models); !s.ok()) return s;
     if (absl::Status s = renderer_.SetPaths(paths); !s.ok()) return s;
+    const std::vector<LidarView> lidars = Lidars();
+    if (absl::Status s = UpdatePoints(lidars); !s.ok()) return s;
     if (!applied_display_ || !SameDisplay(*applied_display_, state_.display)) {
       if (absl::Status s = renderer_.SetDisplayOptions(state_.display); !s.ok()) return s;
       applied_display_ = state_.display;
@@ -322,7 +340,7 @@ class Session {
       const int builds = frames_ == 0 ? 2 : 1;  // the first frame twice: auto-sized windows get their size
       for (int b = 0; b < builds; ++b) {
         overlay_->BeginFrame(w, h, input, dt);
-        if (state_.panel) overlay_->Panel(listed, stats, now_ns, state_, Lidars());
+        if (state_.panel) overlay_->Panel(listed, stats, now_ns, state_, lidars);
         for (const View& v : views) overlay_->Annotate(v, h, listed, objects, state_);
         if (b + 1 < builds) overlay_->DiscardFrame();
       }
@@ -368,6 +386,7 @@ class Session {
       if (c == 'h') state_.panel = !state_.panel;
       if (c == 't') state_.display.tint_by_age = !state_.display.tint_by_age;
       if (c == 'k') state_.paths = !state_.paths;
+      if (c == 'n') state_.lidar_points = !state_.lidar_points;
       if (c >= '1' && c <= '9' && size_t(c - '1') < cams.size()) state_.selected_camera = cams[c - '1'].id;
       if (c == '0') state_.selected_camera.clear();
     }
@@ -411,6 +430,24 @@ class Session {
     return s;
   }
 
+  // The point layer: the subscriptions ask for points only while it is on; the renderer's cloud is
+  // replaced only when a LiDAR's points changed (or the layer was toggled).
+  absl::Status UpdatePoints(const std::vector<LidarView>& lidars) {
+    for (auto& c : clients_) c->SetIncludeLidarPoints(state_.lidar_points);
+    std::vector<std::pair<std::string, uint64_t>> serials;
+    if (state_.lidar_points) {
+      for (const LidarView& l : lidars)
+        if (l.points) serials.emplace_back(l.id, l.points_serial);
+    }
+    if (points_drawn_ && serials == point_serials_) return absl::OkStatus();
+    if (absl::Status s = renderer_.SetPointCloud(state_.lidar_points ? LidarPointsByTrack(lidars) : PointCloud{}); !s.ok()) {
+      return s;
+    }
+    point_serials_ = std::move(serials);
+    points_drawn_ = true;
+    return absl::OkStatus();
+  }
+
   // Whether a view's pose, projection or viewport differs from the last frame's (labels move).
   bool ViewsMoved(const std::vector<View>& views) const {
     if (views.size() != last_views_.size()) return true;
@@ -441,6 +478,8 @@ class Session {
   std::vector<std::unique_ptr<SceneClient>> clients_;
   std::vector<Projector> projectors_;
   std::vector<View> last_views_;  // the previous frame's, for the overlay cache
+  std::vector<std::pair<std::string, uint64_t>> point_serials_;  // the LiDAR clouds in the renderer
+  bool points_drawn_ = false;
   TriangleMesh mesh_;
   std::unique_ptr<MeshBvh> bvh_;
   std::chrono::steady_clock::time_point last_frame_ = std::chrono::steady_clock::now();

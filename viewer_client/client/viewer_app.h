@@ -36,6 +36,7 @@ struct ViewerOptions {
   bool draw_frustums = true;
   bool panel = true;        // the on-screen panel and annotations (ImGui)
   bool select_data = true;  // data selection: frames only of cameras whose frustum meets a view
+  bool lidar_points = true;  // the LiDAR point layer (key n) at start; off: no points subscribed
   int max_frames = 0;  // window: close after this many frames (0 = until the user closes it); headless: frames to draw (0 = 1)
   // TLS to the server (issue 8): PEM CA of the server certificate (empty = plaintext), and an
   // optional client certificate and key for mutual TLS.
@@ -59,6 +60,9 @@ std::vector<View> QuadViews(int width, int height, const View& browse, const std
                             const std::vector<std::string>& locked);
 // The frusta the server should select cameras by: every view's clip-from-local matrix.
 SelectionViews SelectionOf(const std::vector<View>& views);
+// Every LiDAR's newest sweep of people points in one cloud for Renderer::SetPointCloud, coloured by
+// track id (IdColor: a person keeps its colour from sweep to sweep; grey for unassigned points).
+PointCloud LidarPointsByTrack(const std::vector<LidarView>& lidars);
 // Writes RGBA8 rows-top-first pixels as a PNG.
 absl::Status WritePng(const std::string& path, const std::vector<uint8_t>& rgba, int width, int height);
 

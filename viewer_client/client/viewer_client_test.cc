@@ -241,6 +241,30 @@ TEST(DataSelection, SmallMovesKeepTheSubscriptionLargeOnesRenewIt) {
   EXPECT_TRUE(ViewsDifferALot(base, SelectionViews{}));                   // selection switched off
 }
 
+TEST(LidarPointLayer, EveryLidarsPointsColouredByTrackGreyWhenUnassigned) {
+  auto cloud = std::make_shared<LidarPointCloud>();
+  cloud->p_local = {{1, 2, 0.5f}, {1.1f, 2, 1.0f}, {5, 5, 1}};
+  cloud->track_id = {7, 7, 0};
+  auto other = std::make_shared<LidarPointCloud>();
+  other->p_local = {{-3, 4, 1.5f}};
+  other->track_id = {9};
+  std::vector<LidarView> lidars(3);
+  lidars[0].points = cloud;
+  lidars[1].points = nullptr;  // a LiDAR whose points have not arrived
+  lidars[2].points = other;
+  const PointCloud drawn = LidarPointsByTrack(lidars);
+  ASSERT_EQ(drawn.positions_local_m.size(), 4u);
+  ASSERT_EQ(drawn.colors.size(), 4u);
+  EXPECT_EQ(drawn.positions_local_m[1], Eigen::Vector3f(1.1f, 2, 1.0f));
+  EXPECT_EQ(drawn.positions_local_m[3], Eigen::Vector3f(-3, 4, 1.5f));
+  EXPECT_EQ(drawn.colors[0], IdColor(7));
+  EXPECT_EQ(drawn.colors[1], drawn.colors[0]) << "one person, one colour";
+  EXPECT_EQ(drawn.colors[2], IdColor(0));
+  EXPECT_EQ(drawn.colors[3], IdColor(9));
+  EXPECT_NE(drawn.colors[3], drawn.colors[0]);
+  EXPECT_TRUE(LidarPointsByTrack({}).positions_local_m.empty());
+}
+
 TEST(ViewerOptions, CheckNamesTheProblem) {
   ViewerOptions o;
   EXPECT_EQ(o.Check(), "");

@@ -26,6 +26,7 @@
 #include "viewer_client/render/passes/gbuffer_pass.h"
 #include "viewer_client/render/passes/gl_util.h"
 #include "viewer_client/render/passes/line_pass.h"
+#include "viewer_client/render/passes/point_pass.h"
 #include "viewer_client/render/passes/projection_pass.h"
 #include "viewer_client/render/passes/resolve_pass.h"
 #include "viewer_client/render/passes/shadow_maps.h"
@@ -46,6 +47,7 @@ using internal::FramebufferGuard;
 using internal::GbufferPass;
 using internal::LinePass;
 using internal::MatricesFinite;
+using internal::PointPass;
 using internal::ProjectionPass;
 using internal::ResolveMode;
 using internal::ResolvePass;
@@ -82,6 +84,7 @@ struct Renderer::Impl {
   std::unique_ptr<ShadowVolumePass> shadow_volumes;
   ViewCachePass cache;
   std::unique_ptr<ResolvePass> resolve;
+  std::unique_ptr<PointPass> points;
   std::unique_ptr<LinePass> lines;
   int width = 0, height = 0;  // of the targets
   // Views of the last Render drawn at reduced resolution: (viewport, the part of it drawn into).
@@ -133,7 +136,8 @@ absl::Status Renderer::Impl::Render(const std::vector<View>& views, int w, int h
       cache.Forget(slot);
       DrawViewExact(frame, view, seen);  // G-buffer, projector passes, resolve
     }
-    lines->Draw(view, cameras);  // frustums and paths on top
+    points->Draw(frame, view, seen);  // point cloud, depth tested against the resolved scene
+    lines->Draw(view, cameras);       // frustums and paths on top
   }
   glBindVertexArray(0);
   glUseProgram(0);
@@ -382,6 +386,7 @@ absl::StatusOr<std::unique_ptr<Renderer>> Renderer::Create(const RendererOptions
       !s.ok()) {
     return s;
   }
+  if (absl::Status s = assign(impl->points, PointPass::Create()); !s.ok()) return s;
   if (absl::Status s = assign(impl->lines, LinePass::Create()); !s.ok()) return s;
   if (absl::Status s = CheckGl("Renderer::Create"); !s.ok()) return s;
   return std::unique_ptr<Renderer>(new Renderer(std::move(impl)));
@@ -442,6 +447,11 @@ absl::Status Renderer::SetDynamicModels(const std::vector<DynamicModel>& models)
 }
 
 absl::Status Renderer::SetPaths(const std::vector<Polyline>& paths) { return impl_->lines->SetPaths(paths); }
+
+absl::Status Renderer::SetPointCloud(const PointCloud& points) {
+  if (absl::Status s = impl_->points->Set(points); !s.ok()) return s;
+  return internal::CheckGl("SetPointCloud");
+}
 
 absl::Status Renderer::Render(const std::vector<View>& views, int framebuffer_width, int framebuffer_height) {
   if (framebuffer_width <= 0 || framebuffer_height <= 0) {

@@ -9,7 +9,8 @@
 // into a G-buffer (shaded colour, normal, depth); then each projector whose frustum meets the view
 // adds its video in a screen-space pass limited to its frustum's footprint (back faces of the
 // frustum volume), weighted per pixel by the overlap policy; then a resolve pass writes colour and
-// depth into the caller's framebuffer, and lines (frustums, paths) are drawn on top. Shadow maps are
+// depth into the caller's framebuffer, and points (SetPointCloud) and lines (frustums, paths) are
+// drawn on top, depth tested. Shadow maps are
 // rendered only when a projector's pose or the geometry changed. Cost on llvmpipe (issue 7
 // performance, docs/BENCHMARKS.md "## Rendering"): the static model is split into grid chunks and
 // each view or shadow map draws only the chunks its frustum may see; the projector pass rejects
@@ -132,6 +133,15 @@ struct Polyline {
   Eigen::Vector3f color = Eigen::Vector3f(1, 1, 1);
 };
 
+// Points drawn as squares of point_size_px pixels, depth tested against the scene (LiDAR foreground
+// points, issue 16); they receive no video. Positions in the local frame, relative to the model's
+// origin (floats are fine there), one RGB colour in [0, 1] per point.
+struct PointCloud {
+  std::vector<Eigen::Vector3f> positions_local_m;
+  std::vector<Eigen::Vector3f> colors;
+  float point_size_px = 3;  // 1..64, clamped to what the GL supports
+};
+
 // One picture in the framebuffer.
 struct View {
   Viewport viewport;
@@ -139,6 +149,7 @@ struct View {
   Eigen::Matrix4d projection = Eigen::Matrix4d::Identity();  // GL clip from eye
   bool draw_frustums = true;
   bool draw_paths = true;           // the polylines of SetPaths
+  bool draw_points = true;          // the point cloud of SetPointCloud
   std::string highlight_camera_id;  // this projector's frustum is drawn brighter and thicker
   Eigen::Vector3f clear_color = Eigen::Vector3f(0.62f, 0.74f, 0.86f);  // sky
 };
@@ -276,6 +287,8 @@ class Renderer {
   absl::Status SetDynamicObjects(const std::vector<DynamicBox>& boxes);  // = cuboid DynamicModels
   absl::Status SetDynamicModels(const std::vector<DynamicModel>& models);
   absl::Status SetPaths(const std::vector<Polyline>& paths);
+  // Replaces the point cloud (uploaded once, drawn every frame until replaced); empty: none.
+  absl::Status SetPointCloud(const PointCloud& points);
   absl::Status SetDisplayOptions(const DisplayOptions& display);
   // Seconds on any monotonic clock for snapshot ages; until the first call the renderer uses its
   // own steady clock. Replays and tests pass their own time.
