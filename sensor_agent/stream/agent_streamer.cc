@@ -13,24 +13,15 @@
 #include "ave/v1/ave.grpc.pb.h"
 #include "fusion_server/core/convert.h"
 #include "model_store/common/log.h"
+#include "sensor_agent/stream/link.h"
 #include "sensor_agent/stream/metadata_buffer.h"
 
 namespace ave {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-// Sleeps up to `duration`, waking early when `stop` is set.
-void SleepUnlessStopped(Clock::duration duration, const std::atomic<bool>& stop) {
-  const auto until = Clock::now() + duration;
-  while (!stop.load() && Clock::now() < until) {
-    std::this_thread::sleep_for(std::min<Clock::duration>(until - Clock::now(), std::chrono::milliseconds(20)));
-  }
-}
-
-bool IsFatal(grpc::StatusCode code) {
-  return code == grpc::StatusCode::UNAUTHENTICATED || code == grpc::StatusCode::PERMISSION_DENIED;
-}
+using Clock = stream_link::Clock;
+using stream_link::IsFatal;
+using stream_link::SleepUnlessStopped;
 
 }  // namespace
 
@@ -135,13 +126,7 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
   };
 
   while (!stop.load() && !source_done) {
-    grpc::ChannelArguments args;
-    const int keepalive_ms = static_cast<int>(options_.keepalive.count());
-    args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, keepalive_ms);
-    args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, keepalive_ms);
-    args.SetInt(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
-    args.SetInt(GRPC_ARG_HTTP2_MAX_PINGS_WITHOUT_DATA, 0);
-    args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 2 * keepalive_ms);  // also the connect timeout
+    const grpc::ChannelArguments args = stream_link::SensorChannelArgs(options_.keepalive);
     absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = net::MakeChannel(options_.server, options_.tls, args);
     if (!channel.ok()) return absl::InvalidArgumentError(absl::StrCat("camera '", id, "': ", channel.status().message()));
     auto stub = v1::SensorService::NewStub(*channel);

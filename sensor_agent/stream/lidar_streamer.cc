@@ -12,23 +12,15 @@
 #include "ave/v1/ave.grpc.pb.h"
 #include "fusion_server/core/convert.h"
 #include "model_store/common/log.h"
+#include "sensor_agent/stream/link.h"
 #include "sensor_agent/stream/agent_streamer.h"
 
 namespace ave {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-void SleepUnlessStopped(Clock::duration duration, const std::atomic<bool>& stop) {
-  const auto until = Clock::now() + duration;
-  while (!stop.load() && Clock::now() < until) {
-    std::this_thread::sleep_for(std::min<Clock::duration>(until - Clock::now(), std::chrono::milliseconds(20)));
-  }
-}
-
-bool IsFatal(grpc::StatusCode code) {
-  return code == grpc::StatusCode::UNAUTHENTICATED || code == grpc::StatusCode::PERMISSION_DENIED;
-}
+using Clock = stream_link::Clock;
+using stream_link::IsFatal;
+using stream_link::SleepUnlessStopped;
 
 void PutLe16(std::string& out, uint16_t v) {
   out.push_back(static_cast<char>(v & 0xFF));
@@ -186,13 +178,7 @@ absl::Status LidarStreamer::Run(const std::atomic<bool>& stop) {
   };
 
   while (!stop.load() && !source_done) {
-    grpc::ChannelArguments args;
-    const int keepalive_ms = static_cast<int>(options_.keepalive.count());
-    args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, keepalive_ms);
-    args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, keepalive_ms);
-    args.SetInt(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
-    args.SetInt(GRPC_ARG_HTTP2_MAX_PINGS_WITHOUT_DATA, 0);
-    args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 2 * keepalive_ms);
+    const grpc::ChannelArguments args = stream_link::SensorChannelArgs(options_.keepalive);
     absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = net::MakeChannel(options_.server, options_.tls, args);
     if (!channel.ok()) return absl::InvalidArgumentError(absl::StrCat("lidar '", id, "': ", channel.status().message()));
     auto stub = v1::SensorService::NewStub(*channel);
@@ -264,7 +250,9 @@ absl::Status LidarStreamer::Run(const std::atomic<bool>& stop) {
         AVE_LOG(ERROR) << "lidar '" << id << "': refused by the server: " << status.error_message();
         return absl::Status(static_cast<absl::StatusCode>(status.error_code()), status.error_message());
       }
-      if (source_done) break;
+      // The source's end, or --max-frames / --duration reached while the server is away: stop (as
+      // the camera path does since issue 14; else the loop would reconnect without pause for ever).
+      if (source_done || limited()) break;
       // Jittered exponential backoff; the tracker keeps seeing every sweep meanwhile (stable ids),
       // the sweeps themselves are dropped.
       std::uniform_int_distribution<int64_t> jitter(backoff.count() / 2, backoff.count());

@@ -229,5 +229,33 @@ TEST_F(LidarStreamerFaults, AWrongTokenIsFatalNotRetried) {
   EXPECT_EQ(s.code(), absl::StatusCode::kUnauthenticated) << s;
 }
 
+// Issue 14's agent fix, for the LiDAR uplink too: a --duration reached while the server never
+// answers ends the run instead of reconnecting in a tight loop for ever.
+TEST(LidarStreamerLimits, DurationEndsTheRunWhileTheServerIsUnreachable) {
+  LidarStreamOptions options;
+  options.server = "127.0.0.1:1";  // nothing listens: every connect is refused
+  options.sensor_id = "hdl";
+  options.token = "sensor";
+  options.duration_s = 0.3;
+  options.pace_hz = 20;
+  options.backoff_initial = std::chrono::milliseconds(20);
+  options.backoff_max = std::chrono::milliseconds(40);
+  LidarStreamer streamer(options, WalkerSweeps(), fixtures::TruthFootTracker());
+  std::atomic<bool> stop{false}, done{false};
+  absl::Status status;
+  std::thread run([&] {
+    status = streamer.Run(stop);
+    done = true;
+  });
+  for (int i = 0; i < 400 && !done; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(50));  // 20 s at most
+  const bool ended_by_itself = done.load();
+  stop = true;
+  run.join();
+  EXPECT_TRUE(ended_by_itself) << "still running 20 s after a 0.3 s --duration; " << streamer.stats().connects
+                               << " connection attempts";
+  EXPECT_TRUE(status.ok()) << status;
+  EXPECT_LT(streamer.stats().connects, 100);
+}
+
 }  // namespace
 }  // namespace ave

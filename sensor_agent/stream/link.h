@@ -1,0 +1,43 @@
+#pragma once
+// What the camera and the LiDAR uplinks (agent_streamer.cc, lidar_streamer.cc) share about their
+// link to the server: the channel's keepalive settings, which refusals are final, and a sleep that
+// a stop request cuts short. Internal to sensor_agent/stream.
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <thread>
+
+#include <grpcpp/grpcpp.h>
+
+namespace ave::stream_link {
+
+using Clock = std::chrono::steady_clock;
+
+// Sleeps up to `duration`, waking early when `stop` is set.
+inline void SleepUnlessStopped(Clock::duration duration, const std::atomic<bool>& stop) {
+  const auto until = Clock::now() + duration;
+  while (!stop.load() && Clock::now() < until) {
+    std::this_thread::sleep_for(std::min<Clock::duration>(until - Clock::now(), std::chrono::milliseconds(20)));
+  }
+}
+
+// The server refused this sensor's credentials: retrying cannot help.
+inline bool IsFatal(grpc::StatusCode code) {
+  return code == grpc::StatusCode::UNAUTHENTICATED || code == grpc::StatusCode::PERMISSION_DENIED;
+}
+
+// HTTP/2 keepalive pings every `keepalive` (the server permits one every 0.5 s), even without
+// calls, so a silent dead link is noticed in about two intervals; the connect attempt is bounded
+// by twice the interval (RELIABILITY.md, "blocked link").
+inline grpc::ChannelArguments SensorChannelArgs(std::chrono::milliseconds keepalive) {
+  grpc::ChannelArguments args;
+  const int keepalive_ms = static_cast<int>(keepalive.count());
+  args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, keepalive_ms);
+  args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, keepalive_ms);
+  args.SetInt(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
+  args.SetInt(GRPC_ARG_HTTP2_MAX_PINGS_WITHOUT_DATA, 0);
+  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 2 * keepalive_ms);  // also the connect timeout
+  return args;
+}
+
+}  // namespace ave::stream_link
