@@ -410,6 +410,7 @@ int main(int argc, char** argv) {
       }
       auto stub = ave::v1::SceneService::NewStub(*channel);
       grpc::ClientContext context;
+      context.set_wait_for_ready(true);  // as the sensor streams below
       context.AddMetadata("authorization", "Bearer " + o.viewer_token);
       ave::v1::SubscribeRequest request;
       request.set_viewer_id("loadgen-viewer-" + std::to_string(v));
@@ -460,6 +461,11 @@ int main(int argc, char** argv) {
       if (!channel.ok()) return fail(std::string(channel.status().message()));
       auto stub = ave::v1::SensorService::NewStub(*channel);
       grpc::ClientContext context;
+      // Hundreds of connections open at once on a loaded machine: a node's first connect attempt
+      // can fail (seen once in 12 CI-like runs: "failed to connect to all addresses"), and gRPC
+      // then fails a call that does not wait at once. A real agent retries with backoff
+      // (AgentStreamer); here the call waits for the channel's own reconnection instead.
+      context.set_wait_for_ready(true);
       auto stream = stub->Stream(&context);
       ave::v1::SensorMessage m;
       m.mutable_hello()->set_camera_id(camera_id(i));
