@@ -1,15 +1,25 @@
 #!/usr/bin/env bash
-# Runs a command on a virtual X display of its own: Xvfb picks a free display number itself
-# (-displayfd), so tests that run in parallel (ctest -j, two checkouts on one machine) never race for
-# the same number, as `xvfb-run -a` can (it probes lock files, then starts the server: two callers
-# may both probe :99 free, and one of them fails). Usage: with_xvfb.sh COMMAND [ARGS...]
+# Runs a command on a virtual X display of its own. Xvfb picks a free display number itself
+# (-displayfd), and starts are serialised under a lock until the new display answers a client:
+# two Xvfb starting at the same moment could otherwise both go for the same number (seen under
+# ctest -j2: both wrote ":0", and neither test could open it), as `xvfb-run -a` also can.
+# Usage: with_xvfb.sh COMMAND [ARGS...]
 set -euo pipefail
 tmp=$(mktemp -d)
-trap 'kill "$xvfb" 2>/dev/null || true; wait "$xvfb" 2>/dev/null || true; rm -rf "$tmp"' EXIT
+xvfb=""
+trap '[ -n "$xvfb" ] && { kill "$xvfb" 2>/dev/null || true; wait "$xvfb" 2>/dev/null || true; }; rm -rf "$tmp"' EXIT
+exec 9>"${TMPDIR:-/tmp}/.ave-with-xvfb.lock"
+flock 9
 mkfifo "$tmp/display"
-Xvfb -displayfd 3 -screen 0 1280x1024x24 -nolisten tcp 3>"$tmp/display" 2>"$tmp/xvfb.log" &
+Xvfb -displayfd 3 -screen 0 1280x1024x24 -nolisten tcp 3>"$tmp/display" 2>"$tmp/xvfb.log" 9>&- &
 xvfb=$!
-# Xvfb writes the number once it accepts connections; EOF without one means it did not start.
 read -r number <"$tmp/display" || true
 [ -n "${number:-}" ] || { cat "$tmp/xvfb.log" >&2; echo "with_xvfb: Xvfb did not start" >&2; exit 1; }
+# Ready means a client can connect: wait for that (or for the server's death), not for a time.
+until DISPLAY=":$number" xdotool getdisplaygeometry >/dev/null 2>&1; do
+  kill -0 "$xvfb" 2>/dev/null || { cat "$tmp/xvfb.log" >&2; echo "with_xvfb: Xvfb :$number exited" >&2; exit 1; }
+  sleep 0.05
+done
+flock -u 9
+exec 9>&-
 DISPLAY=":$number" "$@"
