@@ -62,7 +62,10 @@ server_pid=$!
 pids+=("$server_pid")
 port=""
 for _ in $(seq 1 200); do
-  port=$(sed -n 's/^listening on port \([0-9]*\)$/\1/p' "$out/server.out" 2>/dev/null | head -1)
+  # The server's output file is created by the background job, which may not have run yet: a
+  # missing file is "no port yet", not an error (under set -e and pipefail it ended the demo at
+  # once, silently; seen once in the loaded test runs, issue 14).
+  port=$(sed -n 's/^listening on port \([0-9]*\)$/\1/p' "$out/server.out" 2>/dev/null | head -1 || true)
   [ -n "$port" ] && break
   kill -0 "$server_pid" 2>/dev/null || { cat "$out/server.log" >&2; echo "demo: ave-server failed to start" >&2; exit 1; }
   sleep 0.1
