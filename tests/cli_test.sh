@@ -79,6 +79,8 @@ expect_error "server --store not SQLite" "$tmp/junk" "$bin/ave-server" --listen 
 expect_error "server --campus-grid 0" "campus_grid_m" "${S[@]}" --campus-grid 0
 expect_error "server --max-ingest-fps -1" "flow budgets" "${S[@]}" --max-ingest-fps -1
 expect_error "server --max-frame-mb nan" "max_jpeg_bytes" "${S[@]}" --max-frame-mb nan
+expect_error "server --listen port out of range" "port '70000' is not in 0..65535" "$bin/ave-server" --listen 127.0.0.1:70000 --store "$tmp/s3.db" --admin-token t
+expect_error "server --listen host not resolving" "host 'no-such-host.invalid' does not resolve" "$bin/ave-server" --listen no-such-host.invalid:0 --insecure-plaintext --store "$tmp/s3.db" --admin-token t
 expect_error "server --metrics-listen bad" "metrics address 'nope'" "${S[@]}" --metrics-listen nope
 expect_error "server no token at all" "no token" env -u AVE_ADMIN_TOKEN -u AVE_SENSOR_TOKEN -u AVE_VIEWER_TOKEN "$bin/ave-server" --listen 127.0.0.1:0 --store "$tmp/s2.db"
 expect_error "server env AVE_TLS_CERT missing" "$missing/env.pem" env AVE_TLS_CERT="$missing/env.pem" AVE_TLS_KEY="$missing/k.pem" "${S[@]}"

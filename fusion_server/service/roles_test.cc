@@ -13,6 +13,7 @@
 #include <gmock/gmock.h>
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
+#include <sqlite3.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
@@ -255,6 +256,40 @@ TEST_F(Roles, TokensAreStoredHashedSurviveRestartAndRevocationBites) {
   EXPECT_THAT(s.error_message(), HasSubstr("camera 'cam-a'"));
 }
 
+TEST_F(Roles, AStoredTokenWithAnUnknownRoleIsRefusedAndNamedInTheLog) {
+  StartServer();
+  auto channel = Channel();
+  ASSERT_TRUE(AddCamera(channel.get(), kAdmin, "cam-a").ok());
+  grpc::Status s;
+  const std::string sensor = IssueToken(channel.get(), "sensor", "cam-a", &s);
+  ASSERT_TRUE(s.ok());
+  const std::string viewer = IssueToken(channel.get(), "viewer", "", &s);
+  ASSERT_TRUE(s.ok());
+  const std::string store_path = server_.store_path();
+  server_.Stop();
+  // A row a newer release (or a hand edit) wrote with a role this server does not know.
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(store_path.c_str(), &db), SQLITE_OK);
+  const std::string edit = "UPDATE tokens SET role = 'operator' WHERE hash = '" + HashToken(sensor) + "'";
+  EXPECT_EQ(sqlite3_exec(db, edit.c_str(), nullptr, nullptr, nullptr), SQLITE_OK);
+  EXPECT_EQ(sqlite3_changes(db), 1);
+  sqlite3_close(db);
+
+  ServerOptions options = server_.Options("", "", kAdmin);
+  options.campus_grid_m = 8;
+  testing::internal::CaptureStderr();
+  const absl::Status restarted = server_.Start(options);
+  const std::string log = testing::internal::GetCapturedStderr();
+  ASSERT_TRUE(restarted.ok()) << restarted;
+  EXPECT_THAT(log, HasSubstr("token " + HashToken(sensor).substr(0, 12)));
+  EXPECT_THAT(log, HasSubstr("role 'operator'"));
+  address_ = server_.address();
+  channel = Channel();
+  s = Stream(channel.get(), "cam-a", sensor);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::UNAUTHENTICATED) << s.error_message();
+  EXPECT_TRUE(Subscribe(channel.get(), viewer).ok());  // the other rows still load
+}
+
 using Tls = Fixture;
 
 net::TlsServerOptions ServerTls(bool mutual) {
@@ -279,6 +314,37 @@ TEST_F(Tls, ClientsTrustingTheSiteCaConnectOthersDoNot) {
   // Misconfiguration names the file.
   auto missing = net::MakeChannel(address_, {.ca_file = "/no/such/ca.pem"});
   EXPECT_THAT(std::string(missing.status().message()), HasSubstr("/no/such/ca.pem"));
+}
+
+TEST_F(Tls, ACertificateAndAKeyThatDoNotMatchAreRefusedNamingBoth) {
+  net::TlsServerOptions tls = ServerTls(false);
+  tls.key_file = (Certs() / "other" / "server.key").string();
+  auto credentials = net::ServerCredentials(tls);
+  ASSERT_FALSE(credentials.ok());
+  EXPECT_EQ(credentials.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(credentials.status().message(), HasSubstr("other/server.key"));
+  EXPECT_THAT(credentials.status().message(), HasSubstr("server.pem"));
+  EXPECT_THAT(credentials.status().message(), HasSubstr("does not match"));
+  // The server does not start on it (it would listen and fail every handshake).
+  ServerOptions options = server_.Options("bootstrap-sensor", kViewer, kAdmin);
+  options.tls = tls;
+  EXPECT_FALSE(server_.Start(options).ok());
+
+  // A client certificate with another sensor's key, and a "key" that is a certificate.
+  net::TlsClientOptions client{.ca_file = (Certs() / "ca.pem").string(),
+                               .cert_file = (Certs() / "sensor-cam-a.pem").string(),
+                               .key_file = (Certs() / "other" / "sensor-x.key").string()};
+  auto channel_credentials = net::ClientCredentials(client);
+  ASSERT_FALSE(channel_credentials.ok());
+  EXPECT_THAT(channel_credentials.status().message(), HasSubstr("TLS client key"));
+  EXPECT_THAT(channel_credentials.status().message(), HasSubstr("sensor-x.key"));
+  client.key_file = (Certs() / "ca.pem").string();
+  channel_credentials = net::ClientCredentials(client);
+  ASSERT_FALSE(channel_credentials.ok());
+  EXPECT_THAT(channel_credentials.status().message(), HasSubstr("holds no readable private key"));
+  // The matching pair is accepted.
+  client.key_file = (Certs() / "sensor-cam-a.key").string();
+  EXPECT_TRUE(net::ClientCredentials(client).ok());
 }
 
 TEST_F(Tls, SensorsMustPresentAClientCertificateWhenMutualTlsIsOn) {

@@ -19,6 +19,7 @@ namespace ave {
 std::string ServerOptions::Check() const {
   if (listen_address.empty()) return "listen_address is empty";
   if (store_path.empty()) return "store_path is empty";
+  if (absl::Status s = net::CheckListenAddressSyntax(listen_address); !s.ok()) return std::string(s.message());
   if (absl::Status s = net::CheckServerTransport(listen_address, tls); !s.ok()) return std::string(s.message());
   if (plaintext_warning_period.count() <= 0) return "plaintext_warning_period must be > 0";
   if (const std::string why = auth_limit.Check(); !why.empty()) return why;
@@ -143,8 +144,15 @@ absl::StatusOr<std::unique_ptr<FusionServer>> FusionServer::Start(const ServerOp
   absl::StatusOr<std::vector<store::TokenRecord>> stored = impl->store->ListTokens();
   if (!stored.ok()) return stored.status();
   for (const store::TokenRecord& t : *stored) {
+    if (t.revoked) continue;
     absl::StatusOr<Role> role = ParseRole(t.role);
-    if (t.revoked || !role.ok()) continue;
+    if (!role.ok()) {
+      // A row written by a newer release or edited by hand: nobody may use it, and the operator
+      // should know why a token that `ave-admin list-tokens` shows does not let its holder in.
+      AVE_LOG(WARNING) << "model store: token " << t.hash.substr(0, 12) << " ('" << t.label << "') has role '"
+                       << t.role << "', which this server does not know (sensor, viewer, admin): it is refused";
+      continue;
+    }
     tokens.Add(t.hash, Principal{*role, t.camera_id});
   }
   if (tokens.size() == 0) {
@@ -187,7 +195,7 @@ absl::StatusOr<std::unique_ptr<FusionServer>> FusionServer::Start(const ServerOp
   builder.RegisterService(impl->admin.get());
   impl->server = builder.BuildAndStart();
   if (!impl->server || impl->port == 0) {
-    return absl::UnavailableError(absl::StrCat("cannot listen on ", options.listen_address, " (address in use?)"));
+    return net::ExplainUnusableListenAddress(options.listen_address);
   }
   if (options.tls.cert_file.empty() && !net::IsLoopbackAddress(options.listen_address)) {
     // Allowed by --insecure-plaintext only (Check()); repeated so that nobody forgets it is on.

@@ -53,6 +53,23 @@ absl::Status CheckServerTransport(const std::string& address, const TlsServerOpt
 // The file's bytes, or NotFound/Unavailable naming the file and what it was for.
 absl::StatusOr<std::string> ReadSmallFile(const std::string& path, const std::string& what);
 
+// OK when `key_pem` is the private key of the first certificate in `cert_pem`; else InvalidArgument
+// naming both by their labels (e.g. "TLS server key 'k.pem'"): a certificate that holds none, a
+// key that cannot be read (or is encrypted), or a pair that does not match, which would otherwise
+// only show as every handshake failing.
+absl::Status CheckKeyMatchesCertificate(const std::string& cert_pem, const std::string& cert_label,
+                                        const std::string& key_pem, const std::string& key_label);
+
+// OK, or InvalidArgument naming the address: "host:port" (or "[v6]:port", "ipv4:"/"dns:" forms)
+// without a port, or with one outside 0..65535 (gRPC would wrap 70000 to 4464 and listen there).
+// unix: addresses pass.
+absl::Status CheckListenAddressSyntax(const std::string& address);
+
+// Why a listen address that gRPC refused cannot be used, for the error message: a missing or
+// out-of-range port, a host that does not resolve, or the bind error itself (address in use,
+// not this host's address, a privileged port). Never OK: call it after gRPC failed to listen.
+absl::Status ExplainUnusableListenAddress(const std::string& address);
+
 absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> ClientCredentials(const TlsClientOptions& options);
 absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> ServerCredentials(const TlsServerOptions& options);
 

@@ -2,6 +2,11 @@
 // every client: plaintext only on loopback, unless the operator passes --insecure-plaintext.
 #include "ave/net/tls.h"
 
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -61,6 +66,38 @@ TEST(Transport, ClientsRefuseAPlaintextNonLoopbackTargetNamingIt) {
   EXPECT_TRUE(MakeChannel("10.1.2.3:50051", {.insecure_plaintext = true}).ok());
   auto tls = MakeChannel("10.1.2.3:50051", {.ca_file = "/no/such/ca.pem"});
   EXPECT_THAT(std::string(tls.status().message()), HasSubstr("/no/such/ca.pem"));  // past the plaintext check
+}
+
+TEST(Transport, AnUnusableListenAddressIsExplainedByItsRealCause) {
+  EXPECT_THAT(std::string(ExplainUnusableListenAddress("127.0.0.1:99999").message()), HasSubstr("not in 0..65535"));
+  EXPECT_THAT(std::string(ExplainUnusableListenAddress("127.0.0.1").message()), HasSubstr("no port"));
+  // gRPC itself would wrap 70000 to 4464 and listen there: the syntax check refuses it first.
+  EXPECT_THAT(std::string(CheckListenAddressSyntax("127.0.0.1:70000").message()), HasSubstr("not in 0..65535"));
+  EXPECT_THAT(std::string(CheckListenAddressSyntax("[::1]").message()), HasSubstr("no port"));
+  EXPECT_TRUE(CheckListenAddressSyntax("[::1]:0").ok());
+  EXPECT_TRUE(CheckListenAddressSyntax("dns:///localhost:50051").ok());
+  EXPECT_TRUE(CheckListenAddressSyntax("unix:/tmp/ave.sock").ok());
+  EXPECT_THAT(std::string(ExplainUnusableListenAddress("no-such-host.invalid:5000").message()),
+              HasSubstr("host 'no-such-host.invalid' does not resolve"));
+  // 192.0.2.1 (TEST-NET-1) is nobody's address, so not this host's.
+  EXPECT_THAT(std::string(ExplainUnusableListenAddress("192.0.2.1:5000").message()),
+              HasSubstr("not one of this host's"));
+  // A port another socket listens on.
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  ASSERT_GE(fd, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ASSERT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+  ASSERT_EQ(::listen(fd, 1), 0);
+  socklen_t length = sizeof a;
+  ASSERT_EQ(::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &length), 0);
+  const std::string taken = "127.0.0.1:" + std::to_string(ntohs(a.sin_port));
+  const absl::Status status = ExplainUnusableListenAddress(taken);
+  EXPECT_EQ(status.code(), absl::StatusCode::kUnavailable);
+  EXPECT_THAT(std::string(status.message()), HasSubstr(taken));
+  EXPECT_THAT(std::string(status.message()), HasSubstr("holds the port"));
+  ::close(fd);
 }
 
 }  // namespace
