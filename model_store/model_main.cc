@@ -282,20 +282,21 @@ int main(int argc, char** argv) {
   build_in.Add(build);
   build->add_option("--db", db, "model store (SQLite) to put the mesh, terrain tiles, buildings and provenance in");
   build->add_option("--name", name, "scene name (default: the input's file stem)");
-  build->add_option("--mesh", meshes, "write the assembled mesh (.ply, .obj, .gltf, .glb); repeatable");
-  build->add_option("--exr", exr, "write the height grid (DTM + DSM) as OpenEXR");
-  build->add_option("--classified", classified, "also write the classified points (.las: a LAS input keeps every byte but the classes)");
+  build->add_option("--mesh", meshes, "write the assembled mesh (.ply, .obj, .gltf, .glb); repeatable")->check(ave::cli::WritableFile());
+  build->add_option("--exr", exr, "write the height grid (DTM + DSM) as OpenEXR")->check(ave::cli::WritableFile());
+  build->add_option("--classified", classified, "also write the classified points (.las: a LAS input keeps every byte but the classes)")->check(ave::cli::WritableFile());
 
   CLI::App* classify = app.add_subcommand("classify", "write the points with computed LAS classes and print a JSON summary");
   classify_in.Add(classify);
   classify->add_option("--out", classify_out,
                        "output .las: a LAS input is given back with only its classification changed (version, format, scale, "
                        "offset, unit, VLRs and every other byte kept); PLY/PCD become LAS 1.4 format 6 in metres")
-      ->required();
+      ->required()
+      ->check(ave::cli::WritableFile());
 
   CLI::App* exp = app.add_subcommand("export", "write the store's newest static model (mesh) or terrain (EXR)");
   exp->add_option("--db", export_db, "model store")->required();
-  exp->add_option("--out", export_out, ".ply, .obj, .gltf, .glb (mesh) or .exr (terrain)")->required();
+  exp->add_option("--out", export_out, ".ply, .obj, .gltf, .glb (mesh) or .exr (terrain)")->required()->check(ave::cli::WritableFile());
 
   // The buildings library adds `fit` (semi-automatic primitive fit); its callback runs during
   // parsing and exits non-zero itself on failure.

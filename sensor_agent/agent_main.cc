@@ -180,7 +180,7 @@ int main(int argc, char** argv) {
   app.add_flag("--insecure-plaintext", options.tls.insecure_plaintext,
                "send the sensor token in plaintext to a non-loopback server (without --tls-ca)");
   app.add_option("--spill", options.spill_path,
-                 "file for metadata buffered during long outages (default: temp dir; '-' = memory only)");
+                 "file for metadata buffered during long outages (default: temp dir; '-' = memory only)")->check(ave::cli::WritableFile());
   app.add_option("--metadata-buffer", options.metadata_in_memory, "metadata records kept in memory during an outage")
       ->capture_default_str()->check(ave::cli::Range(1, 1 << 24));
   app.add_option("--position", position, "mounting position x,y,z (m, site frame) for sources without a pose");
@@ -195,7 +195,7 @@ int main(int argc, char** argv) {
   std::string tracks_out, background = "average";
   app.add_flag("--detect", detect, "detect and track moving objects; their boxes go with each frame");
   app.add_flag("--detect-only", detect_only, "detect and track without a server: one JSON per frame to --out");
-  app.add_option("--out", tracks_out, "--detect-only: tracks file, one JSON object per frame ('-' = stdout)");
+  app.add_option("--out", tracks_out, "--detect-only: tracks file, one JSON object per frame ('-' = stdout)")->check(ave::cli::WritableFile());
   app.add_option("--background", background, "background model: average, gaussian or mixture")
       ->capture_default_str()->check(CLI::IsMember({"average", "gaussian", "mixture"}));
   // Offline files need no live output: by default --detect-only holds each record for the

@@ -100,7 +100,7 @@ expect_error "agent --fps nan" "fps" "${A[@]}" --fps nan
 expect_error "agent --latency nan" "--latency" "${A[@]}" --detect-only --out - --latency nan
 expect_error "agent --position 2 values" "--position/--look-at" "${A[@]}" --position 1,2 --look-at 1,2,3
 expect_error "agent --detect-only --out missing" "$missing/t.jsonl" "${A[@]}" --detect-only --out "$missing/t.jsonl"
-expect_error "agent --spill folder missing" "--spill $missing/a.meta: no folder" "${A[@]}" --spill "$missing/a.meta"
+expect_error "agent --spill folder missing" "--spill: $missing/a.meta: no folder" "${A[@]}" --spill "$missing/a.meta"
 out=$(timeout 30 "${A[@]}" --duration 0.3 2>&1); rc=$?   # a --duration ends the agent even with no server
 if [ $rc -ne 0 ]; then echo "FAIL agent --duration with no server: exit $rc: $(tail -2 <<<"$out")"; fail=1; fi
 AD=("$bin/ave-admin" --server 127.0.0.1:1 --token t)
@@ -112,6 +112,7 @@ expect_error "admin issue-token --role bad" "--role: root not in" "${AD[@]}" iss
 expect_error "admin --size bad" "--size must be WIDTHxHEIGHT" "${AD[@]}" add-camera --id c --position 1,2,3 --look-at 4,5,6 --size 64x
 expect_error "admin --quaternion bad" "--quaternion" "${AD[@]}" add-camera --id c --position 1,2,3 --quaternion 1,0,0
 V=("$bin/ave-viewer" --server 127.0.0.1:1 --headless --timeout 1)
+expect_error "viewer window without DISPLAY" "GLFW: no DISPLAY set; use the headless context" env -u DISPLAY -u WAYLAND_DISPLAY "$bin/ave-viewer" --server 127.0.0.1:1 --timeout 1
 expect_error "viewer --snapshot folder missing" "no folder $missing" "${V[@]}" --snapshot "$missing/x.png"
 expect_error "viewer --depth folder missing" "no folder $missing" "${V[@]}" --snapshot "$tmp/x.png" --depth "$missing/d.exr"
 expect_error "viewer --record under a file" "--record $tmp/junk/rec" "${V[@]}" --record "$tmp/junk/rec"
@@ -137,13 +138,30 @@ expect_error "sim --fps nan" "--fps" "$bin/ave-sim" camera --scenario minimal --
 expect_error "sim --start nan" "--start" "$bin/ave-sim" camera --scenario minimal --camera cam1 --out "$tmp/sim" --start nan
 expect_error "sim --seconds nan" "--seconds" "$bin/ave-sim" rotating-lidar --scenario courtyard --out "$tmp/sim" --seconds nan
 expect_error "calibrate --square nan" "square" "$bin/ave-calibrate" --images "$tmp/junk" --board 9x6 --square nan --out "$tmp/k.yaml"
-expect_error "calibrate --out folder missing" "--out $missing/k.yaml: no folder" "$bin/ave-calibrate" --images "$tmp/junk" --board 9x6 --square 0.02 --out "$missing/k.yaml"
+expect_error "calibrate --out folder missing" "--out: $missing/k.yaml: no folder" "$bin/ave-calibrate" --images "$tmp/junk" --board 9x6 --square 0.02 --out "$missing/k.yaml"
 expect_error "calibrate --images not images" "board was found in 0 of 1" "$bin/ave-calibrate" --images "$tmp/junk" --board 9x6 --square 0.02 --out "$tmp/k.yaml"
 expect_error "loadgen --server-bin missing" "--server-bin $missing/ave-server" "$bin/ave-loadgen" --server-bin "$missing/ave-server" --duration 1 --streams 1
 expect_error "loadgen --duration nan" "--duration" "$bin/ave-loadgen" --duration nan
 expect_error "loadgen --tls-ca missing" "$missing/ca.pem" "$bin/ave-loadgen" --server 127.0.0.1:1 --duration 1 --streams 1 --tls-ca "$missing/ca.pem"
 expect_error "bench --scenario missing" "$missing/s.yaml" "$bin/ave-bench" sim --scenario "$missing/s.yaml"
 expect_error "bench --seconds nan" "--seconds" "$bin/ave-bench" sim --seconds nan
+# Outputs into a folder that exists but takes no file (/proc/self refuses new files, even to root):
+# refused at parse time, naming the flag and the path, before any work (issue 14).
+ro=/proc/self
+expect_error "agent --spill folder unwritable" "--spill: $ro/a.meta: folder $ro cannot be written" "${A[@]}" --spill "$ro/a.meta"
+expect_error "agent --detect-only --out unwritable" "--out: $ro/t.jsonl: folder $ro cannot be written" "${A[@]}" --detect-only --out "$ro/t.jsonl"
+expect_error "calibrate --out folder unwritable" "--out: $ro/k.yaml: folder $ro cannot be written" "$bin/ave-calibrate" --images "$tmp/junk" --board 9x6 --square 0.02 --out "$ro/k.yaml"
+expect_error "model build --mesh unwritable" "--mesh: $ro/m.ply: folder $ro cannot be written" "$bin/ave-model" build --input "$tmp/junk.pcd" --mesh "$ro/m.ply"
+expect_error "model build --exr unwritable" "--exr: $ro/t.exr: folder $ro cannot be written" "$bin/ave-model" build --input "$tmp/junk.pcd" --exr "$ro/t.exr"
+expect_error "model build --classified unwritable" "--classified: $ro/c.las: folder $ro cannot be written" "$bin/ave-model" build --input "$tmp/junk.pcd" --classified "$ro/c.las"
+expect_error "model classify --out unwritable" "--out: $ro/c.las: folder $ro cannot be written" "$bin/ave-model" classify --input "$tmp/junk.pcd" --out "$ro/c.las"
+expect_error "model export --out unwritable" "--out: $ro/m.gltf: folder $ro cannot be written" "$bin/ave-model" export --db "$tmp/junk" --out "$ro/m.gltf"
+expect_error "model export --out is a folder" "--out: $tmp: is a folder" "$bin/ave-model" export --db "$tmp/junk" --out "$tmp"
+expect_error "loadgen --plot unwritable" "--plot: $ro/p.png: folder $ro cannot be written" "$bin/ave-loadgen" --duration 1 --streams 1 --plot "$ro/p.png"
+for b in "pose --png" "detect --png" "lidar --png" "environment --png" "model --png" "render --plot" "select --plot"; do
+  set -- $b
+  expect_error "bench $1 $2 unwritable" "$2: $ro/p.png: folder $ro cannot be written" "$bin/ave-bench" "$1" "$2" "$ro/p.png"
+done
 if [ -e "$missing" ]; then echo "FAIL something created $missing"; fail=1; fi
 
 [ "$fail" = 0 ] && echo "cli: all checks passed"

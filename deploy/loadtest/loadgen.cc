@@ -268,7 +268,7 @@ int main(int argc, char** argv) {
   app.add_option("--admin-token", o.admin_token, "with --server: admin token (env AVE_ADMIN_TOKEN)");
   app.add_option("--tls-ca", o.tls_ca, "with --server: PEM CA when the server speaks TLS");
   app.add_option("--viewer-rate", o.viewer_rate_hz, "update rate viewers ask for (Hz)")->capture_default_str()->check(ave::cli::Range(0.1, 1000.0));
-  app.add_option("--plot", o.plot, "PNG plot over time")->capture_default_str();
+  app.add_option("--plot", o.plot, "PNG plot over time")->capture_default_str()->check(ave::cli::WritableFile());
   app.add_option("--max-drops", o.max_drops, "exit 1 if viewers skipped more frames than this (-1 = no check)");
   app.add_option("--max-p99-ms", o.max_p99_ms, "exit 1 if p99 latency exceeds this (0 = no check)")->check(ave::cli::Range(0.0, 1e9));
   app.add_option("--min-received-ratio", o.min_received_ratio,

@@ -1,7 +1,13 @@
 #pragma once
 // Shared command-line conventions of the ave-* executables (only their mains include this):
 // --help exits 0, a bad flag exits 2 with one line naming it, and "x,y,z" triples parse strictly.
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <cmath>
+#include <cstring>
+#include <filesystem>
 #include <cstdlib>
 #include <iostream>
 #include <limits>
@@ -46,6 +52,36 @@ inline CLI::Validator Range(double min, double max) {
       desc.str(), "FINITE_RANGE");
 }
 inline CLI::Validator PositiveNumber() { return Range(std::numeric_limits<double>::min(), std::numeric_limits<double>::max()); }
+
+// A file the program will write (a plot, a PNG, a YAML, a model): empty (none) and "-" (stdout)
+// pass; otherwise its folder must exist and take a new file, probed by creating and removing one
+// (so root on a read-only mount or /proc is refused too), and an existing file must open for
+// writing. Checked at parse time, so an unwritable output stops the program before minutes of work
+// instead of being lost silently at the end (issue 14, "Input surfaces").
+inline CLI::Validator WritableFile() {
+  return CLI::Validator(
+      [](std::string& path) -> std::string {
+        if (path.empty() || path == "-") return {};
+        const std::filesystem::path p(path);
+        std::filesystem::path dir = p.parent_path();
+        if (dir.empty()) dir = ".";
+        std::error_code ec;
+        if (!std::filesystem::is_directory(dir, ec)) return path + ": no folder " + dir.string();
+        if (std::filesystem::is_directory(p, ec)) return path + ": is a folder, not a file";
+        const std::string probe = (dir / (".ave-write-probe-" + std::to_string(::getpid()))).string();
+        const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL, 0600);
+        if (fd < 0) return path + ": folder " + dir.string() + " cannot be written (" + std::strerror(errno) + ")";
+        ::close(fd);
+        ::unlink(probe.c_str());
+        if (std::filesystem::exists(p, ec)) {
+          const int existing = ::open(path.c_str(), O_WRONLY);
+          if (existing < 0) return path + ": cannot be written (" + std::strerror(errno) + ")";
+          ::close(existing);
+        }
+        return {};
+      },
+      "FILE (writable)", "WRITABLE_FILE");
+}
 
 // "x,y,z" (metres, site frame) -> a vector; false on any other shape.
 inline bool ParseVec3(const std::string& text, Eigen::Vector3d& out) {

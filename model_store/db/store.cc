@@ -547,21 +547,41 @@ absl::StatusOr<std::vector<Eigen::Vector2d>> UnpackPolygon(std::string_view byte
   if (bytes.size() % (2 * sizeof(double)) != 0) return absl::DataLossError(what + ": polygon blob of " + std::to_string(bytes.size()) + " bytes");
   std::vector<Eigen::Vector2d> out(bytes.size() / (2 * sizeof(double)));
   std::memcpy(static_cast<void*>(out.data()), bytes.data(), bytes.size());
+  for (size_t i = 0; i < out.size(); ++i) {
+    if (!out[i].allFinite()) return absl::DataLossError(what + ": polygon vertex " + std::to_string(i) + " is not finite");
+  }
   return out;
+}
+
+// The rules a scene, a tile and a building obey, checked when they are stored and again when they
+// are read back (a row edited or damaged on disk is refused naming the store, table and row, not
+// handed on; issue 14). Empty when usable.
+std::string CheckSceneFields(const SceneRecord& scene) {
+  if (scene.name.empty() || scene.name.size() > 128) return "scene name must be 1..128 characters";
+  if (!scene.origin.allFinite()) return "scene '" + scene.name + "': origin must be finite";
+  return {};
+}
+std::string CheckTile(const TerrainTileRecord& t) {
+  if (t.cols <= 0 || t.rows <= 0 || !(t.resolution_m > 0) || !std::isfinite(t.resolution_m) || !std::isfinite(t.min_x) ||
+      !std::isfinite(t.min_y)) {
+    return "terrain tile (" + std::to_string(t.tile_col) + ", " + std::to_string(t.tile_row) +
+           ") needs cols, rows, resolution_m > 0 and a finite corner";
+  }
+  return {};
+}
+std::string CheckBuilding(const StoredBuilding& b) {
+  if (!std::isfinite(b.area_m2)) return "building " + std::to_string(b.building_id) + " area must be finite";
+  return {};
 }
 
 std::string ValidateScene(const SceneRecord& scene, const std::vector<TerrainTileRecord>& tiles,
                           const std::vector<StoredBuilding>& buildings) {
-  if (scene.name.empty() || scene.name.size() > 128) return "scene name must be 1..128 characters";
-  if (!scene.origin.allFinite()) return "scene '" + scene.name + "': origin must be finite";
+  if (std::string why = CheckSceneFields(scene); !why.empty()) return why;
   for (const TerrainTileRecord& t : tiles) {
-    if (t.cols <= 0 || t.rows <= 0 || !(t.resolution_m > 0) || !std::isfinite(t.min_x) || !std::isfinite(t.min_y)) {
-      return "scene '" + scene.name + "': terrain tile (" + std::to_string(t.tile_col) + ", " + std::to_string(t.tile_row) +
-             ") needs cols, rows, resolution_m > 0 and a finite corner";
-    }
+    if (std::string why = CheckTile(t); !why.empty()) return "scene '" + scene.name + "': " + why;
   }
   for (const StoredBuilding& b : buildings) {
-    if (!std::isfinite(b.area_m2)) return "scene '" + scene.name + "': building " + std::to_string(b.building_id) + " area must be finite";
+    if (std::string why = CheckBuilding(b); !why.empty()) return "scene '" + scene.name + "': " + why;
   }
   return {};
 }
@@ -640,6 +660,8 @@ absl::StatusOr<std::vector<SceneRecord>> Store::ListScenes() {
     s.summary_json = stmt.Text(8);
     if (!stmt.IsNull(9)) s.static_model_version = stmt.Int(9);
     s.created_at_ns = stmt.Int(10);
+    if (std::string why = CheckSceneFields(s); !why.empty())
+      return absl::DataLossError("model store '" + path() + "': scenes row " + std::to_string(s.id) + ": " + why);
     out.push_back(std::move(s));
   }
 }
@@ -654,9 +676,12 @@ absl::StatusOr<std::vector<TerrainTileRecord>> Store::GetTerrainTiles(int64_t sc
   for (;;) {
     AVE_ASSIGN_OR_RETURN(row, stmt.Step());
     if (!row) return out;
-    out.push_back(TerrainTileRecord{static_cast<int>(stmt.Int(0)), static_cast<int>(stmt.Int(1)), stmt.Double(2), stmt.Double(3),
-                                    stmt.Double(4), static_cast<int>(stmt.Int(5)), static_cast<int>(stmt.Int(6)), stmt.Text(7),
-                                    std::string(stmt.BlobAt(8))});
+    TerrainTileRecord t{static_cast<int>(stmt.Int(0)), static_cast<int>(stmt.Int(1)), stmt.Double(2), stmt.Double(3),
+                        stmt.Double(4), static_cast<int>(stmt.Int(5)), static_cast<int>(stmt.Int(6)), stmt.Text(7),
+                        std::string(stmt.BlobAt(8))};
+    if (std::string why = CheckTile(t); !why.empty())
+      return absl::DataLossError("model store '" + path() + "': scene " + std::to_string(scene_id) + ": " + why);
+    out.push_back(std::move(t));
   }
 }
 
@@ -678,6 +703,7 @@ absl::StatusOr<std::vector<StoredBuilding>> Store::GetBuildings(int64_t scene_id
     b.footprint_m = std::move(footprint);
     b.area_m2 = stmt.Double(3);
     b.point_count = stmt.Int(4);
+    if (std::string why = CheckBuilding(b); !why.empty()) return absl::DataLossError(what + ": " + why);
     out.push_back(std::move(b));
   }
   AVE_ASSIGN_OR_RETURN(parts, Stmt::Prepare(*impl_->db,

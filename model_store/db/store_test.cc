@@ -551,6 +551,52 @@ TEST(StoreScenes, SceneTilesBuildingsAndProvenanceRoundTripExactly) {
   EXPECT_FALSE(store->ListScenes()->back().static_model_version.has_value());
 }
 
+// Issue 14: a scene, tile or building row damaged behind the store's back is refused on reading,
+// naming the store, the table or scene and the field; it is never handed on as if it were good.
+TEST(StoreScenes, DamagedRowsAreDataLossNamingTheRow) {
+  TempDir dir;
+  const std::string path = dir.File("scenes.db");
+  int64_t id = 0;
+  {
+    auto store = OpenOrDie(path);
+    ASSERT_TRUE(store);
+    SceneRecord scene;
+    scene.name = "campus";
+    StoredBuilding b;
+    b.building_id = 7;
+    b.footprint_m = {{0, 0}, {4, 0}, {4, 3}};
+    b.area_m2 = 12;
+    auto put = store->PutScene(scene, {TerrainTileRecord{1, 2, 0, 0, 0.5, 4, 4, "exr", "x"}}, {b});
+    ASSERT_TRUE(put.ok()) << put.status();
+    id = *put;
+  }
+  const auto reopen_and = [&](const std::string& damage) {
+    {
+      RawDb raw(path);
+      EXPECT_EQ(raw.Exec(damage), SQLITE_OK) << raw.Error();
+    }
+    return OpenOrDie(path);
+  };
+  auto store = reopen_and("UPDATE terrain_tiles SET resolution_m = -1");
+  absl::StatusOr<std::vector<TerrainTileRecord>> tiles = store->GetTerrainTiles(id);
+  ASSERT_FALSE(tiles.ok());
+  EXPECT_EQ(tiles.status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_THAT(std::string(tiles.status().message()), HasSubstr("terrain tile (1, 2)"));
+  EXPECT_THAT(std::string(tiles.status().message()), HasSubstr(path));
+  store.reset();
+  store = reopen_and("UPDATE buildings SET area_m2 = 9e999");  // +inf in SQLite
+  EXPECT_THAT(std::string(store->GetBuildings(id).status().message()), HasSubstr("building 7 area must be finite"));
+  store.reset();
+  store = reopen_and("UPDATE buildings SET area_m2 = 12, footprint = x'000000000000F07F0000000000000000'");  // (inf, 0)
+  EXPECT_THAT(std::string(store->GetBuildings(id).status().message()), HasSubstr("polygon vertex 0 is not finite"));
+  store.reset();
+  store = reopen_and("UPDATE scenes SET name = ''");
+  absl::StatusOr<std::vector<SceneRecord>> scenes = store->ListScenes();
+  ASSERT_FALSE(scenes.ok());
+  EXPECT_EQ(scenes.status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_THAT(std::string(scenes.status().message()), HasSubstr("scenes row " + std::to_string(id)));
+}
+
 }  // namespace
 }  // namespace ave::store
 

@@ -14,6 +14,7 @@
 
 #ifdef AVE_HAVE_PCL
 #include <pcl/PCLPointCloud2.h>
+#include <pcl/common/io.h>
 #include <pcl/io/pcd_io.h>
 #endif
 
@@ -77,12 +78,34 @@ absl::Status CheckPcdHeader(const std::string& path) {
     if (!size.ok()) return size.status();
     absl::StatusOr<uint64_t> count = keys.count("COUNT") ? number(keys["COUNT"][i], 1 << 16, "COUNT") : uint64_t{1};
     if (!count.ok()) return count.status();
+    // A field of COUNT 0 made PCL size its buffer from a wrapped-around point size (a 4 GiB
+    // allocation, ave_fuzz_point_cloud); SIZE must be one PCL lays out for its TYPE.
+    if (*count == 0) return absl::InvalidArgumentError(path + ": PCD header: COUNT of field '" + fields[i].substr(0, 40) + "' is 0");
+    const std::string& type = keys["TYPE"][i];
+    const bool size_fits_type = (type == "F" && (*size == 4 || *size == 8)) ||
+                                ((type == "I" || type == "U") && (*size == 1 || *size == 2 || *size == 4));
+    if (!size_fits_type) {
+      return absl::InvalidArgumentError(path + ": PCD header: field '" + fields[i].substr(0, 40) + "' has TYPE '" +
+                                        type.substr(0, 8) + "' with SIZE " + std::to_string(*size) +
+                                        " (F takes 4 or 8, I and U 1, 2 or 4)");
+    }
     point_bytes += *size * *count;
   }
   if (keys["POINTS"].size() != 1) return absl::InvalidArgumentError(path + ": PCD header: POINTS takes one value");
   absl::StatusOr<uint64_t> points = number(keys["POINTS"][0], uint64_t{1} << 32, "POINTS");
   if (!points.ok()) return points.status();
   if (*points == 0) return absl::InvalidArgumentError(path + ": PCD holds no points (POINTS 0)");
+  // PCL sizes its buffer from WIDTH x HEIGHT, not POINTS: they must agree.
+  if (keys["WIDTH"].size() != 1 || (keys.count("HEIGHT") && keys["HEIGHT"].size() != 1))
+    return absl::InvalidArgumentError(path + ": PCD header: WIDTH and HEIGHT take one value each");
+  absl::StatusOr<uint64_t> width = number(keys["WIDTH"][0], uint64_t{1} << 32, "WIDTH");
+  if (!width.ok()) return width.status();
+  absl::StatusOr<uint64_t> height = keys.count("HEIGHT") ? number(keys["HEIGHT"][0], uint64_t{1} << 32, "HEIGHT") : uint64_t{1};
+  if (!height.ok()) return height.status();
+  if (*width * *height != *points) {
+    return absl::InvalidArgumentError(path + ": PCD header: WIDTH x HEIGHT = " + std::to_string(*width) + " x " +
+                                      std::to_string(*height) + " is not POINTS " + std::to_string(*points));
+  }
   const std::string data = keys["DATA"].empty() ? "" : keys["DATA"][0];
   if (data != "ascii" && data != "binary" && data != "binary_compressed") {
     return absl::InvalidArgumentError(path + ": PCD header: DATA must be ascii, binary or binary_compressed, not '" +
@@ -135,6 +158,19 @@ absl::StatusOr<PointCloud> ReadPcd(const std::string& path, const CloudReadOptio
   const pcl::PCLPointField* fz = FindField(blob, "z");
   if (!fx || !fy || !fz) return absl::InvalidArgumentError(path + ": PCD lacks an x, y or z field");
   const pcl::PCLPointField* fi = FindField(blob, "intensity");
+  // A SIZE that does not match its TYPE (e.g. "SIZE 2" with "TYPE F") gives a field PCL lays out
+  // narrower than the value it stands for: refused, never read past the point (found by
+  // ave_fuzz_point_cloud).
+  for (const pcl::PCLPointField* f : {fx, fy, fz, fi}) {
+    if (f == nullptr) continue;
+    const int bytes = pcl::getFieldSize(f->datatype);
+    if (bytes == 0 || f->datatype > pcl::PCLPointField::FLOAT64)
+      return absl::InvalidArgumentError(path + ": PCD field '" + f->name + "' has a SIZE and TYPE pair this reader does not take");
+    if (static_cast<uint64_t>(f->offset) + static_cast<uint64_t>(bytes) > blob.point_step)
+      return absl::InvalidArgumentError(path + ": PCD field '" + f->name + "' (" + std::to_string(bytes) +
+                                        " bytes at offset " + std::to_string(f->offset) + ") does not fit its " +
+                                        std::to_string(blob.point_step) + "-byte point; its SIZE does not match its TYPE");
+  }
   const size_t n = static_cast<size_t>(blob.width) * blob.height;
   if (blob.data.size() < n * blob.point_step) return absl::InvalidArgumentError(path + ": PCD data shorter than its header says");
   CloudBuilder builder(options.unit_to_metres.value_or(1.0), options.unit_to_metres ? "override" : "metre");

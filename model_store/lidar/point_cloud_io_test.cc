@@ -107,7 +107,18 @@ TEST(PointCloudIo, BadPcdFilesNameTheFile) {
                                   std::string("VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\n"
                                               "HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n1 2 3\n"),
                                   std::string("VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1000\n"
-                                              "HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1000\nDATA binary\n\x01\x02")}) {
+                                              "HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1000\nDATA binary\n\x01\x02"),
+                                  // SIZE 2 with TYPE F: PCL lays the field out 2 bytes wide; reading
+                                  // it as a float ran past the point (ave_fuzz_point_cloud).
+                                  std::string("VERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 2\nTYPE F F F F\n"
+                                              "COUNT 1 1 1 1\nWIDTH 2\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\n"
+                                              "DATA ascii\n1 2 3 4\n5 6 7 8\n"),
+                                  // COUNT 0: PCL sized its buffer from a wrapped point size (4 GiB).
+                                  std::string("VERSION 0.7\nFIELDS x y z\nSIZE 8 8 8\nTYPE F F F\nCOUNT 2 1 0\n"
+                                              "WIDTH 2\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n1 2 3 4\n"),
+                                  // WIDTH x HEIGHT (what PCL reads) disagreeing with POINTS.
+                                  std::string("VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"
+                                              "WIDTH 3000000\nHEIGHT 1000\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1\nDATA ascii\n1 2 3\n")}) {
     SCOPED_TRACE(text.substr(0, 40));
     ASSERT_TRUE(WriteWholeFile(path, text).ok());
     absl::StatusOr<PointCloud> cloud = ReadPointCloud(path);

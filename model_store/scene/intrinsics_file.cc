@@ -1,5 +1,6 @@
 #include "model_store/scene/intrinsics_file.h"
 
+#include <charconv>
 #include <cstdio>
 #include <fstream>
 #include <sstream>
@@ -44,13 +45,18 @@ absl::StatusOr<PinholeIntrinsics> ReadIntrinsicsFile(const std::string& path) {
 absl::Status WriteIntrinsicsFile(const std::string& path, const PinholeIntrinsics& k, double rms_px, int images_used) {
   std::ofstream out(path);
   if (!out) return absl::InternalError(absl::StrCat("cannot write ", path));
-  char buf[512];
-  std::snprintf(buf, sizeof(buf),
-                "# Camera intrinsics (Zhang's method, ave-calibrate); pixel centres at integers (OpenCV).\n"
-                "width: %d\nheight: %d\nfx: %.10g\nfy: %.10g\ncx: %.10g\ncy: %.10g\ndistortion: [%.10g, %.10g, %.10g, %.10g, %.10g]\n",
-                k.width, k.height, k.fx, k.fy, k.cx, k.cy, k.distortion[0], k.distortion[1], k.distortion[2], k.distortion[3],
-                k.distortion[4]);
-  out << buf;
+  // Shortest text that reads back to the same double (std::to_chars): a calibration written and
+  // read again is bit-identical (checked by ave_fuzz_intrinsics_file), and stays readable.
+  auto num = [](double v) {
+    char buf[32];
+    const std::to_chars_result r = std::to_chars(buf, buf + sizeof buf, v);
+    return std::string(buf, r.ptr);
+  };
+  out << "# Camera intrinsics (Zhang's method, ave-calibrate); pixel centres at integers (OpenCV).\n"
+      << "width: " << k.width << "\nheight: " << k.height << "\nfx: " << num(k.fx) << "\nfy: " << num(k.fy)
+      << "\ncx: " << num(k.cx) << "\ncy: " << num(k.cy) << "\ndistortion: [" << num(k.distortion[0]) << ", "
+      << num(k.distortion[1]) << ", " << num(k.distortion[2]) << ", " << num(k.distortion[3]) << ", "
+      << num(k.distortion[4]) << "]\n";
   if (rms_px >= 0) out << "rms_px: " << rms_px << "\n";
   if (images_used >= 0) out << "images_used: " << images_used << "\n";
   out.flush();

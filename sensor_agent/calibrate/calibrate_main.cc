@@ -17,7 +17,7 @@ int main(int argc, char** argv) {
   app.add_option("--images", images, "glob of chessboard images, e.g. 'DIR/*.jpg' (quote it)")->required();
   app.add_option("--board", board_text, "inner corners COLSxROWS, e.g. 9x6")->required();
   app.add_option("--square", square_m, "side of one square (metres)")->required()->check(ave::cli::PositiveNumber());
-  app.add_option("--out", out, "intrinsics YAML to write (ave-agent / ave-admin --intrinsics)")->required();
+  app.add_option("--out", out, "intrinsics YAML to write (ave-agent / ave-admin --intrinsics)")->required()->check(ave::cli::WritableFile());
   app.add_option("--min-views", min_views, "fewest usable views accepted")->capture_default_str()->check(ave::cli::Range(3, 1000));
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-calibrate")) return *exit_code;
   ave::calib::BoardSpec board;

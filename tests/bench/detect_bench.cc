@@ -606,7 +606,7 @@ Runner AddDetectBench(CLI::App& sub) {
   sub.add_option("--max-range", options->max_error_range_m, "3D error only for pedestrians within this range (m)")
       ->capture_default_str();
   sub.add_option("--hd-frames", options->hd_frames, "frames per camera timed at 1920x1080")->capture_default_str();
-  sub.add_option("--png", options->png, "plot file")->capture_default_str();
+  sub.add_option("--png", options->png, "plot file")->capture_default_str()->check(ave::cli::WritableFile());
   sub.add_option("--min-visibility", options->min_visibility,
                  "visible protocol: truth boxes less visible than this (box area / unoccluded box area) are ignore regions")
       ->capture_default_str()

@@ -196,7 +196,7 @@ Runner AddEnvironmentBench(CLI::App& sub) {
       ->check(ave::cli::Range(1, 600));
   sub.add_option("--step", options->step_s, "seconds between frames")->capture_default_str()->check(ave::cli::Range(0.01, 10.0));
   sub.add_option("--repeats", options->repeats, "timings per stage (median kept)")->capture_default_str()->check(ave::cli::Range(1, 50));
-  sub.add_option("--png", options->png, "plot to write")->capture_default_str();
+  sub.add_option("--png", options->png, "plot to write")->capture_default_str()->check(ave::cli::WritableFile());
   return [options] { return RunEnvironment(*options); };
 }
 

@@ -450,7 +450,7 @@ Runner AddLidarBench(CLI::App& sub) {
   sub.add_option("--window-m", options->window_m, "3D point step: neighbourhood half-width (every chain)")->capture_default_str();
   sub.add_option("--bg-tolerance-m", options->bg_tolerance_m, "3D point step: range tolerance (every chain)")->capture_default_str();
   sub.add_option("--window-rings", options->window_rings, "3D point step: rings above and below (every chain)")->capture_default_str();
-  sub.add_option("--png", options->png, "plot to write")->capture_default_str();
+  sub.add_option("--png", options->png, "plot to write")->capture_default_str()->check(ave::cli::WritableFile());
   return [options] { return RunLidar(*options); };
 }
 

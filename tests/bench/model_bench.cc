@@ -365,7 +365,7 @@ Runner AddModelBench(CLI::App& sub) {
   sub.add_option("--scenario", o->scenario, "scenario name or file (its airborne_lidar spec and effects)");
   sub.add_option("--resolutions", o->resolutions, "grid resolutions to sweep (m, comma-separated)");
   sub.add_option("--scale", o->scale, "cloud sizes for the throughput table (million points, comma-separated)");
-  sub.add_option("--png", o->png, "plot file (empty: none)");
+  sub.add_option("--png", o->png, "plot file (empty: none)")->check(ave::cli::WritableFile());
   sub.add_option("--seed", o->seed, "simulation seed");
   sub.add_flag("--no-buildings", o->no_buildings, "skip building extraction and scoring");
   return [o] { return Run(*o); };

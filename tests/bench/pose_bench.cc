@@ -331,7 +331,7 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--lines", o->lines, "use known 3D line features")->capture_default_str();
   sub.add_option("--new-points", o->new_points, "track and triangulate unknown point features (and add the row where they correct the pose)")
       ->capture_default_str();
-  sub.add_option("--png", o->png, "plot to write (empty: none)")->capture_default_str();
+  sub.add_option("--png", o->png, "plot to write (empty: none)")->capture_default_str()->check(ave::cli::WritableFile());
   return [o] { return RunPose(*o); };
 }
 

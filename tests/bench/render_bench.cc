@@ -582,7 +582,7 @@ Runner AddRenderBench(CLI::App& sub) {
   sub.add_option("--shadow-sizes", o->shadow_sizes, "shadow-map sizes, comma-separated");
   sub.add_option("--shadow-cameras", o->shadow_cameras, "cameras in the shadow-size part")->check(ave::cli::Range(1, 64));
   sub.add_option("--truth-stride", o->truth_stride, "ray-cast every n-th pixel")->check(ave::cli::Range(1, 64));
-  sub.add_option("--plot", o->plot, "PNG plot path");
+  sub.add_option("--plot", o->plot, "PNG plot path")->check(ave::cli::WritableFile());
   sub.add_option("--moving-cameras", o->moving_cameras,
                  "RendererOptions::moving_view_cameras (a moving view seeing more is reduced further)")
       ->check(ave::cli::Range(1, 1000));

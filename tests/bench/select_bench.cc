@@ -204,7 +204,7 @@ Runner AddSelectBench(CLI::App& sub) {
   sub.add_option("--seconds", o->seconds, "measured time")->capture_default_str()->check(ave::cli::Range(1.0, 600.0));
   sub.add_option("--block-x", o->block_x, "the block looked at, x (m, site frame)")->capture_default_str();
   sub.add_option("--block-y", o->block_y, "the block looked at, y (m)")->capture_default_str();
-  sub.add_option("--plot", o->plot, "PNG bar chart")->capture_default_str();
+  sub.add_option("--plot", o->plot, "PNG bar chart")->capture_default_str()->check(ave::cli::WritableFile());
   return [o] { return Run(*o); };
 }
 
