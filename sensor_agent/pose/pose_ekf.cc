@@ -39,6 +39,7 @@ std::string PoseFilterOptions::Check() const {
   if (!positive(angular_accel_noise_rad_s2)) return "angular_accel_noise_rad_s2 must be finite and > 0";
   if (!positive(gps_min_sigma_m)) return "gps_min_sigma_m must be finite and > 0";
   if (!positive(orientation_sigma_deg)) return "orientation_sigma_deg must be finite and > 0";
+  if (!(std::isfinite(orientation_correlation_s) && orientation_correlation_s >= 0)) return "orientation_correlation_s must be finite and >= 0";
   if (!positive(gyro_sigma_rad_s)) return "gyro_sigma_rad_s must be finite and > 0";
   if (!positive(pixel_sigma_px)) return "pixel_sigma_px must be finite and > 0";
   if (!positive(gate_chi2_3dof) || !positive(gate_chi2_2dof)) return "gate_chi2_* must be finite and > 0";
@@ -97,6 +98,7 @@ UpdateResult PoseEkf::Predict(int64_t t_ns) {
       Q.block<3, 3>(second, second).diagonal().setConstant(q * dt);
     }
     P_ = F * P_ * F.transpose() + Q;
+    if (!landmark_ids_.empty()) cross_ = (F * cross_).eval();  // landmarks are static
     Condition();
   }
   return {};
@@ -114,6 +116,10 @@ UpdateResult PoseEkf::Correct(const Eigen::Matrix<double, M, 1>& innovation, con
   if (!std::isfinite(d2)) return {Rejection::kNotFinite, 0};
   if (d2 > gate_chi2) return {Rejection::kGate, d2};
   const Eigen::Matrix<double, 12, M> K = ldlt.solve(PHt.transpose()).transpose();
+  if (!landmark_ids_.empty()) {
+    const Eigen::Matrix<double, Eigen::Dynamic, M> KL = ldlt.solve((cross_.transpose() * H.transpose()).transpose()).transpose();
+    CorrectLandmarks<M>(K, KL, S, innovation);
+  }
   const Matrix12d I_KH = Matrix12d::Identity() - K * H;
   P_ = I_KH * P_ * I_KH.transpose() + K * R * K.transpose();  // Joseph form
   Inject(K * innovation);
@@ -131,11 +137,108 @@ void PoseEkf::Inject(const Vector12d& dx) {
   Matrix12d G = Matrix12d::Identity();
   G.block<3, 3>(kRot, kRot) -= 0.5 * Skew(dtheta);
   P_ = G * P_ * G.transpose();
+  if (!landmark_ids_.empty()) cross_ = (G * cross_).eval();
+}
+
+template <int M>
+void PoseEkf::CorrectLandmarks(const Eigen::Matrix<double, 12, M>& K, const Eigen::Matrix<double, Eigen::Dynamic, M>& KL,
+                               const Eigen::Matrix<double, M, M>& S, const Eigen::Matrix<double, M, 1>& innovation) {
+  cross_ -= K * S * KL.transpose();
+  landmark_cov_ -= KL * S * KL.transpose();
+  landmarks_ += KL * innovation;
+}
+
+void PoseEkf::InflatePose(double position_sigma_m, double orientation_sigma_rad) {
+  if (!(std::isfinite(position_sigma_m) && std::isfinite(orientation_sigma_rad) && position_sigma_m >= 0 && orientation_sigma_rad >= 0)) return;
+  for (int i = 0; i < 3; ++i) {
+    P_(kPos + i, kPos + i) += position_sigma_m * position_sigma_m;
+    P_(kRot + i, kRot + i) += orientation_sigma_rad * orientation_sigma_rad;
+  }
+}
+
+int PoseEkf::LandmarkIndex(int64_t id) const {
+  for (size_t i = 0; i < landmark_ids_.size(); ++i)
+    if (landmark_ids_[i] == id) return static_cast<int>(i);
+  return -1;
+}
+
+bool PoseEkf::AddLandmark(int64_t id, const Eigen::Vector3d& point_in_world, const Eigen::Matrix3d& covariance) {
+  if (LandmarkIndex(id) >= 0 || !point_in_world.allFinite() || !covariance.allFinite()) return false;
+  const Eigen::Matrix3d c = 0.5 * (covariance + covariance.transpose());
+  if (Eigen::LLT<Eigen::Matrix3d>(c).info() != Eigen::Success) return false;
+  const int n = static_cast<int>(landmark_ids_.size()) * 3;
+  landmark_ids_.push_back(id);
+  landmarks_.conservativeResize(n + 3);
+  landmarks_.segment<3>(n) = point_in_world;
+  cross_.conservativeResize(12, n + 3);
+  cross_.middleCols<3>(n).setZero();
+  Eigen::MatrixXd grown = Eigen::MatrixXd::Zero(n + 3, n + 3);
+  grown.topLeftCorner(n, n) = landmark_cov_;
+  grown.bottomRightCorner<3, 3>() = c;
+  landmark_cov_ = std::move(grown);
+  return true;
+}
+
+void PoseEkf::RemoveLandmark(int64_t id) {
+  const int i = LandmarkIndex(id);
+  if (i < 0) return;
+  const int n = static_cast<int>(landmark_ids_.size()) * 3, at = 3 * i, tail = n - at - 3;
+  landmark_ids_.erase(landmark_ids_.begin() + i);
+  Eigen::VectorXd l(n - 3);
+  l << landmarks_.head(at), landmarks_.tail(tail);
+  landmarks_ = std::move(l);
+  Eigen::MatrixXd x(12, n - 3);
+  x << cross_.leftCols(at), cross_.rightCols(tail);
+  cross_ = std::move(x);
+  Eigen::MatrixXd c(n - 3, n - 3);
+  c.topLeftCorner(at, at) = landmark_cov_.topLeftCorner(at, at);
+  c.topRightCorner(at, tail) = landmark_cov_.topRightCorner(at, tail);
+  c.bottomLeftCorner(tail, at) = landmark_cov_.bottomLeftCorner(tail, at);
+  c.bottomRightCorner(tail, tail) = landmark_cov_.bottomRightCorner(tail, tail);
+  landmark_cov_ = std::move(c);
+}
+
+std::optional<std::pair<Eigen::Vector3d, Eigen::Matrix3d>> PoseEkf::Landmark(int64_t id) const {
+  const int i = LandmarkIndex(id);
+  if (i < 0) return std::nullopt;
+  return std::make_pair(Eigen::Vector3d(landmarks_.segment<3>(3 * i)), Eigen::Matrix3d(landmark_cov_.block<3, 3>(3 * i, 3 * i)));
+}
+
+UpdateResult PoseEkf::UpdateLandmark(const PinholeIntrinsics& k, int64_t id, const Eigen::Vector2d& uv) {
+  const int i = LandmarkIndex(id);
+  if (i < 0 || !uv.allFinite()) return {Rejection::kNotFinite, 0};
+  Eigen::Matrix<double, 2, 12> Hp;
+  const std::optional<Eigen::Vector2d> predicted = ProjectPoint(k, landmarks_.segment<3>(3 * i), &Hp);
+  if (!predicted) return {Rejection::kBehindCamera, 0};
+  const Eigen::Matrix<double, 2, 3> Hl = -Hp.block<2, 3>(0, kPos);  // d pixel / d point = - d pixel / d camera position
+  const Eigen::Vector2d innovation = uv - *predicted;
+  const Eigen::Matrix2d R = Eigen::Matrix2d::Identity() * options_.pixel_sigma_px * options_.pixel_sigma_px;
+  // P H' for the pose rows and the landmark rows.
+  const Eigen::Matrix<double, 12, 2> PHt = P_ * Hp.transpose() + cross_.middleCols<3>(3 * i) * Hl.transpose();
+  const Eigen::Matrix<double, Eigen::Dynamic, 2> LHt = cross_.transpose() * Hp.transpose() + landmark_cov_.middleCols<3>(3 * i) * Hl.transpose();
+  const Eigen::Matrix2d S = Hp * PHt + Hl * LHt.middleRows<3>(3 * i) + R;
+  if (!innovation.allFinite() || !S.allFinite()) return {Rejection::kNotFinite, 0};
+  const Eigen::LDLT<Eigen::Matrix2d> ldlt(S);
+  if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().array() > 0).all()) return {Rejection::kNotFinite, 0};
+  const double d2 = innovation.dot(ldlt.solve(innovation));
+  if (!std::isfinite(d2)) return {Rejection::kNotFinite, 0};
+  if (d2 > options_.gate_chi2_2dof) return {Rejection::kGate, d2};
+  const Eigen::Matrix<double, 12, 2> K = ldlt.solve(PHt.transpose()).transpose();
+  const Eigen::Matrix<double, Eigen::Dynamic, 2> KL = ldlt.solve(LHt.transpose()).transpose();
+  P_ -= K * S * K.transpose();
+  CorrectLandmarks<2>(K, KL, S, innovation);
+  Inject(K * innovation);
+  Condition();
+  return {Rejection::kNone, d2};
 }
 
 void PoseEkf::Condition() {
   P_ = (0.5 * (P_ + P_.transpose())).eval();
   for (int i = 0; i < 12; ++i) P_(i, i) = std::max(P_(i, i), options_.min_variance);
+  if (!landmark_ids_.empty()) {
+    landmark_cov_ = (0.5 * (landmark_cov_ + landmark_cov_.transpose())).eval();
+    for (Eigen::Index i = 0; i < landmark_cov_.rows(); ++i) landmark_cov_(i, i) = std::max(landmark_cov_(i, i), options_.min_variance);
+  }
 }
 
 UpdateResult PoseEkf::UpdatePosition(const Eigen::Vector3d& position_m, const Eigen::Matrix3d& covariance) {
@@ -214,14 +317,16 @@ std::optional<Eigen::Vector2d> PoseEkf::LineResidual(const PinholeIntrinsics& k,
   return r;
 }
 
-UpdateResult PoseEkf::UpdateLine(const PinholeIntrinsics& k, const Line3d& line, const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+UpdateResult PoseEkf::UpdateLine(const PinholeIntrinsics& k, const Line3d& line, const Eigen::Vector2d& a, const Eigen::Vector2d& b,
+                                 double extra_variance_px2) {
   if (!a.allFinite() || !b.allFinite() || !line.point.allFinite() || !line.direction.allFinite() || line.direction.norm() < 1e-9) {
     return {Rejection::kNotFinite, 0};
   }
   Eigen::Matrix<double, 2, 12> H;
   const std::optional<Eigen::Vector2d> r = LineResidual(k, line, a, b, &H);
   if (!r) return {Rejection::kBehindCamera, 0};
-  const double var = options_.pixel_sigma_px * options_.pixel_sigma_px;
+  if (!std::isfinite(extra_variance_px2)) return {Rejection::kNotFinite, 0};
+  const double var = options_.pixel_sigma_px * options_.pixel_sigma_px + std::max(0.0, extra_variance_px2);
   return Correct<2>(-*r, H, Eigen::Matrix2d::Identity() * var, options_.gate_chi2_2dof);
 }
 

@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
@@ -38,6 +39,11 @@ struct PoseFilterOptions {
   double angular_accel_noise_rad_s2 = 1.0;  // white angular acceleration (rad/s^2/sqrt(Hz))
   double gps_min_sigma_m = 0.3;         // floor of the GPS sigma: multipath is not in the reported covariance
   double orientation_sigma_deg = 2.0;   // AHRS orientation sigma (AVE §5: 1-3°)
+  // The AHRS error (gyro drift, magnetic disturbance) is correlated over about this long, not
+  // white: readings closer together than this are not independent, so each is weighted as
+  // dt / orientation_correlation_s of one (sigma inflated by sqrt(correlation / dt)). 0: white.
+  // Without it, 150 readings a second make the filter ~12x overconfident in its orientation.
+  double orientation_correlation_s = 1.0;
   double gyro_sigma_rad_s = 0.02;       // gyro rate sigma (noise + slowly varying bias)
   double pixel_sigma_px = 1.5;          // vision point / line-distance sigma
   double gate_chi2_3dof = 25.0;         // GPS / orientation gate (3 dof); chi2(3) p=1e-5 is 25.9
@@ -89,7 +95,27 @@ class PoseEkf {
                            double extra_variance_px2 = 0);
   // A 3D line seen as the image segment (a, b): residual = signed pixel distances of a and b from
   // the projected infinite line.
-  UpdateResult UpdateLine(const PinholeIntrinsics& k, const Line3d& line, const Eigen::Vector2d& a, const Eigen::Vector2d& b);
+  UpdateResult UpdateLine(const PinholeIntrinsics& k, const Line3d& line, const Eigen::Vector2d& a, const Eigen::Vector2d& b,
+                          double extra_variance_px2 = 0);
+
+  // Adds (sigma)² to the position and orientation variances: the caller's evidence says the
+  // filter is lost (e.g. vision has fitted badly for a while), so the next measurements may pull
+  // it back instead of being gated. Negative or non-finite sigmas are ignored.
+  void InflatePose(double position_sigma_m, double orientation_sigma_rad);
+
+  // Estimated 3D points in the state (issue 19: "new features done right"): a point joins with its
+  // own estimate and covariance, and from then on every update keeps its cross-covariances with
+  // the pose, so its observations correct pose and point jointly (SLAM-style EKF; docs/POSE.md).
+  // `id` is the caller's; returns false (nothing added) for a duplicate id or a covariance that is
+  // not finite and positive definite.
+  bool AddLandmark(int64_t id, const Eigen::Vector3d& point_in_world, const Eigen::Matrix3d& covariance);
+  void RemoveLandmark(int64_t id);  // marginalises it out (no-op for an unknown id)
+  bool HasLandmark(int64_t id) const { return LandmarkIndex(id) >= 0; }
+  int landmark_count() const { return static_cast<int>(landmark_ids_.size()); }
+  // Estimate and covariance of a landmark; nullopt for an unknown id.
+  std::optional<std::pair<Eigen::Vector3d, Eigen::Matrix3d>> Landmark(int64_t id) const;
+  // A landmark seen at pixel `uv`: updates pose and every landmark (2x(12+3N) Jacobian).
+  UpdateResult UpdateLandmark(const PinholeIntrinsics& k, int64_t id, const Eigen::Vector2d& uv);
 
   Rigid3d world_from_camera() const { return Rigid3d(q_, p_); }
   const Eigen::Vector3d& velocity() const { return v_; }
@@ -113,6 +139,12 @@ class PoseEkf {
                        const Eigen::Matrix<double, M, M>& R, double gate_chi2);
   void Inject(const Vector12d& dx);
   void Condition();
+  int LandmarkIndex(int64_t id) const;
+  // The landmark part of a correction with gains K (pose, 12xM) and KL (landmarks, 3NxM) and
+  // innovation covariance S: P_pl -= K S KL', P_ll -= KL S KL', landmarks += KL innovation.
+  template <int M>
+  void CorrectLandmarks(const Eigen::Matrix<double, 12, M>& K, const Eigen::Matrix<double, Eigen::Dynamic, M>& KL,
+                        const Eigen::Matrix<double, M, M>& S, const Eigen::Matrix<double, M, 1>& innovation);
 
   PoseFilterOptions options_;
   bool initialized_ = false;
@@ -120,6 +152,11 @@ class PoseEkf {
   Eigen::Vector3d p_ = Eigen::Vector3d::Zero(), v_ = Eigen::Vector3d::Zero(), w_ = Eigen::Vector3d::Zero();
   Eigen::Quaterniond q_ = Eigen::Quaterniond::Identity();
   Matrix12d P_ = Matrix12d::Identity();
+  // Landmarks: ids, stacked positions (3N), pose-landmark cross-covariance (12 x 3N) and landmark
+  // covariance (3N x 3N). Empty unless AddLandmark was called: the pose-only filter pays nothing.
+  std::vector<int64_t> landmark_ids_;
+  Eigen::VectorXd landmarks_;
+  Eigen::MatrixXd cross_, landmark_cov_;
 };
 
 }  // namespace ave::pose

@@ -191,6 +191,7 @@ void PoseTracker::Apply(const ImuReading& s) {
     ++stats_.time_rejected;
     return;
   }
+  const int64_t previous_ns = last_imu_ns_;
   last_imu_ns_ = s.t_ns;
   if (!ekf_.initialized()) {
     first_orientation_ = s;
@@ -208,7 +209,10 @@ void PoseTracker::Apply(const ImuReading& s) {
     return;
   }
   const PoseFilterOptions& o = ekf_.options();
-  const UpdateResult r = ekf_.UpdateOrientation(s.orientation, o.orientation_sigma_deg * 3.14159265358979323846 / 180);
+  // Correlated AHRS error: a reading dt after the last counts as dt / correlation of an independent one.
+  const double dt_s = previous_ns == INT64_MIN ? o.orientation_correlation_s : static_cast<double>(s.t_ns - previous_ns) * 1e-9;
+  const double inflation = o.orientation_correlation_s > dt_s ? std::sqrt(o.orientation_correlation_s / dt_s) : 1.0;
+  const UpdateResult r = ekf_.UpdateOrientation(s.orientation, inflation * o.orientation_sigma_deg * 3.14159265358979323846 / 180);
   (void)ekf_.UpdateRate(s.gyro_rad_s, o.gyro_sigma_rad_s);
   stats_.imu_used += r.accepted();
   stats_.imu_gated += r.rejection == Rejection::kGate;

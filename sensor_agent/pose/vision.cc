@@ -1,8 +1,10 @@
 #include "sensor_agent/pose/vision.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <optional>
 
 #include <Eigen/Eigenvalues>
@@ -11,20 +13,14 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
 
+#include "model_store/common/cpu_clock.h"
 #include "model_store/geometry/bvh.h"
+#include "sensor_agent/pose/vision_match.h"
 
 namespace ave::pose {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double MsSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
-
-constexpr double kBorder_px = 8;       // predictions closer than this to the image edge are skipped
-constexpr double kChamferCap_px = 8;   // coarse pass: edge distances are truncated here
-constexpr double kEdgeSample_px = 4;   // coarse pass: spacing of samples along a predicted model edge
-constexpr double kCoarseMatch_px = 6;  // coarse pass: match radius once the offset is applied
-constexpr double kMinSegment_px = 20;  // line segments shorter than this are ignored
-constexpr double kMaxAngle_rad = 0.035;  // ~2°: a segment's direction against the predicted line's
+using namespace internal;  // NOLINT: the front end's own helpers
 
 // An a priori unknown point: its pixel track and its 3D estimate (local frame) with covariance.
 struct Track {
@@ -33,77 +29,33 @@ struct Track {
   Eigen::Vector3d point = Eigen::Vector3d::Zero();
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Identity();
   int observations = 0;
+  int64_t id = 0;  // landmark id in the pose filter's state (joint mode)
   double LargestSigma() const {
     return std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(covariance, Eigen::EigenvaluesOnly).eigenvalues().maxCoeff()));
   }
 };
 
-struct Segment {
-  Eigen::Vector2d a, b;
+// A known model point matched on a keyframe and followed by KLT since.
+struct KnownTrack {
+  int index = 0;      // into FeatureMap::points
+  cv::Point2f px;     // in the (distorted) frame
+  cv::Point2f key_px;  // where it was on the keyframe, which KLT matches against (no drift)
 };
 
-bool InImage(const PinholeIntrinsics& k, const Eigen::Vector2d& uv, double border) {
-  return uv.x() >= border && uv.y() >= border && uv.x() <= k.width - 1 - border && uv.y() <= k.height - 1 - border;
-}
-
-// Nearest detected corner to `uv` within `radius`; -1 when none.
-int Nearest(const std::vector<cv::Point2f>& corners, const Eigen::Vector2d& uv, double radius) {
-  int best = -1;
-  double best_d2 = radius * radius;
-  for (size_t j = 0; j < corners.size(); ++j) {
-    const double dx = corners[j].x - uv.x(), dy = corners[j].y - uv.y();
-    const double d2 = dx * dx + dy * dy;
-    if (d2 <= best_d2) {
-      best_d2 = d2;
-      best = static_cast<int>(j);
-    }
+// Charges the CPU time since the last lap to a stage.
+class StageTimer {
+ public:
+  explicit StageTimer(VisionFrameStats& stats) : stats_(stats), last_(ThreadCpuClock::now()) {}
+  void Lap(int stage) {
+    const ThreadCpuClock::time_point now = ThreadCpuClock::now();
+    stats_.stage_ms[stage] += std::chrono::duration<double, std::milli>(now - last_).count();
+    last_ = now;
   }
-  return best;
-}
 
-// The image offset that best lays the predicted model edges onto the frame's edges (coarse
-// pass, chamfer matching): mean truncated distance from each sampled model-edge pixel, shifted by
-// the offset, to the nearest Canny edge; a 2 px grid over the search window, then 1 px around the best.
-// Façades repeat horizontal edges (window rows) every few pixels, so a second term aligns the
-// model edges that have sky above them with the frame's skyline (the first edge below the top of
-// each column), which has no such repetition.
-double MeanDistance(const cv::Mat& distance, const std::vector<Eigen::Vector2d>& samples, int dx, int dy) {
-  double sum = 0;
-  int n = 0;
-  for (const Eigen::Vector2d& p : samples) {
-    const int x = static_cast<int>(std::lround(p.x())) + dx, y = static_cast<int>(std::lround(p.y())) + dy;
-    if (x < 0 || y < 0 || x >= distance.cols || y >= distance.rows) continue;
-    sum += std::min(distance.at<float>(y, x), static_cast<float>(kChamferCap_px));
-    ++n;
-  }
-  return n * 2 >= static_cast<int>(samples.size()) && n > 0 ? sum / n : kChamferCap_px;
-}
-
-Eigen::Vector2d ChamferOffset(const cv::Mat& edge_distance, const std::vector<Eigen::Vector2d>& samples, const cv::Mat& skyline_distance,
-                              const std::vector<Eigen::Vector2d>& sky_samples, double radius) {
-  if (samples.size() < 10) return Eigen::Vector2d::Zero();
-  const bool use_sky = sky_samples.size() >= 5;
-  auto score = [&](int dx, int dy) {
-    return MeanDistance(edge_distance, samples, dx, dy) + (use_sky ? MeanDistance(skyline_distance, sky_samples, dx, dy) : 0.0);
-  };
-  const int r = static_cast<int>(radius);
-  int best_x = 0, best_y = 0;
-  double best = score(0, 0);
-  for (int step : {2, 1}) {
-    const int cx = best_x, cy = best_y, reach = step == 2 ? r : 2;
-    for (int dy = cy - reach; dy <= cy + reach; dy += step) {
-      for (int dx = cx - reach; dx <= cx + reach; dx += step) {
-        const double v = score(dx, dy);
-        if (v < best - 1e-9 || (std::abs(v - best) <= 1e-9 && dx * dx + dy * dy < best_x * best_x + best_y * best_y)) {
-          best = v;
-          best_x = dx;
-          best_y = dy;
-        }
-      }
-    }
-  }
-  return Eigen::Vector2d(best_x, best_y);
-}
+ private:
+  VisionFrameStats& stats_;
+  ThreadCpuClock::time_point last_;
+};
 
 }  // namespace
 
@@ -111,8 +63,27 @@ std::string VisionOptions::Check() const {
   if (max_features < 0) return "max_features must be >= 0";
   if (!(search_radius_px > 0) || !(match_radius_px > 0)) return "search_radius_px and match_radius_px must be > 0";
   if (max_new_points < 0) return "max_new_points must be >= 0";
+  if (max_state_points < 0) return "max_state_points must be >= 0";
   if (!(new_point_sigma_m > 0) || !(new_point_prior_depth_m > 0)) return "new_point_sigma_m and new_point_prior_depth_m must be > 0";
+  if (keyframe_interval < 1) return "keyframe_interval must be >= 1";
+  if (min_tracked_known < 0) return "min_tracked_known must be >= 0";
+  if (lock_frames < 0) return "lock_frames must be >= 0";
+  if (lost_frames < 0 || !(lost_orientation_sigma_deg >= 0)) return "lost_frames and lost_orientation_sigma_deg must be >= 0";
+  if (!(tracked_sigma_px >= 0)) return "tracked_sigma_px must be >= 0";
+  if (!(weak_lock_gated_share >= 0 && weak_lock_gated_share <= 1)) return "weak_lock_gated_share must be in [0, 1]";
+  if (!(lock_sigma_px > 0)) return "lock_sigma_px must be > 0";
+  if (!(visibility_cache_m >= 0)) return "visibility_cache_m must be >= 0";
+  if (klt_window_px < 5 || klt_levels < 0 || klt_levels > 6) return "klt_window_px must be >= 5 and klt_levels in [0, 6]";
+  if (grid_cell_px < 8 || grid_min_tracks < 1) return "grid_cell_px must be >= 8 and grid_min_tracks >= 1";
+  if (detect_level < 0 || detect_level > 3) return "detect_level must be in [0, 3]";
   return {};
+}
+
+const char* VisionStageName(int stage) {
+  static constexpr std::array<const char*, kVisionStageCount> kNames = {
+      "grey conversion", "corners + sub-pixel", "segments (LSD)", "Canny + distance transforms", "chamfer/sky-line search",
+      "KLT (pyramid + tracks)", "visibility ray casts", "association", "EKF updates", "unknown features"};
+  return stage >= 0 && stage < kVisionStageCount ? kNames[stage] : "?";
 }
 
 FeatureMap CampusFeatureMap(const scene::SyntheticCampus& campus) {
@@ -143,11 +114,22 @@ struct VisionTracker::Impl {
   MeshBvh bvh;
   PinholeIntrinsics k;
   VisionOptions options;
-  cv::Mat previous_gray;
-  std::vector<Track> tracks;
+  std::vector<cv::Mat> previous_pyramid, keyframe_pyramid;
+  std::vector<Track> tracks;        // unknown features
+  std::vector<KnownTrack> known;    // known points followed since the last keyframe
+  std::vector<int> known_lines;     // line features matched on the last keyframe, followed by edge search
+  int frames_since_keyframe = 0;
+  int good_full_matches = 0;  // consecutive full matchings that fitted well (lock_frames)
+  int bad_full_matches = 0;   // ... and badly (lost_frames)
+  int64_t next_track_id = 1;
   bool distorted = false;  // the frames show the lens distortion of the intrinsics
   cv::Matx33d K;
   cv::Mat distortion;
+  // Visibility per static-model feature, computed lazily and reused while the camera stays within
+  // options.visibility_cache_m of cache_centre: -1 unknown, 0 hidden, 1 seen.
+  Eigen::Vector3d cache_centre = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
+  std::vector<int8_t> point_seen, point_sky, line_seen, line_mid_seen;
+  std::vector<std::vector<uint8_t>> line_sky_samples;  // per line, per chamfer sample: seen with sky above
 
   // Frame pixels -> ideal pinhole pixels (cv::undistortPoints), where the filter measures.
   std::vector<cv::Point2f> ToIdeal(const std::vector<cv::Point2f>& raw) const {
@@ -172,44 +154,76 @@ struct VisionTracker::Impl {
     const double distance = d.norm();
     return distance > 0.5 && !bvh.Raycast(camera_centre, d, 1e-3, distance - 0.3);
   }
-
-  // Known points the filter's pose predicts visible: (map index, predicted pixel).
-  // Corners against the sky come first: nothing else nearby looks like them, while wall feet sit
-  // among objects, people and ground texture.
-  std::vector<std::pair<int, Eigen::Vector2d>> PredictPoints(const PoseEkf& ekf) const {
-    std::vector<std::pair<int, Eigen::Vector2d>> skyline, other;
-    const Eigen::Vector3d centre = ekf.world_from_camera().translation;
-    for (size_t i = 0; i < map.points.size(); ++i) {
-      const std::optional<Eigen::Vector2d> uv = ekf.ProjectPoint(k, map.points[i]);
-      if (!uv || !InImage(k, *uv, kBorder_px) || !Visible(centre, map.points[i])) continue;
-      (SkyAbove(centre, map.points[i]) ? skyline : other).emplace_back(static_cast<int>(i), *uv);
-    }
-    skyline.insert(skyline.end(), other.begin(), other.end());
-    return skyline;
-  }
   // Nothing of the model is seen just above the point (0.3 m).
   bool SkyAbove(const Eigen::Vector3d& camera_centre, const Eigen::Vector3d& p) const {
     return !bvh.Raycast(camera_centre, p + Eigen::Vector3d(0, 0, 0.3) - camera_centre, 1e-3).has_value();
   }
 
-  // Unique matches (map index, corner index) of predicted points within `radius` of prediction + offset.
-  static std::vector<std::pair<int, int>> MatchPoints(const std::vector<std::pair<int, Eigen::Vector2d>>& predicted,
-                                                      const std::vector<cv::Point2f>& corners, const Eigen::Vector2d& offset,
-                                                      double radius) {
-    std::vector<std::pair<int, int>> out;
-    std::vector<int> owner(corners.size(), -1);
-    for (const auto& [index, uv] : predicted) {
-      const int j = Nearest(corners, uv + offset, radius);
-      if (j < 0) continue;
-      if (owner[j] >= 0) {  // two predictions claim one corner: keep neither
-        out[owner[j]].second = -1;
-        continue;
-      }
-      owner[j] = static_cast<int>(out.size());
-      out.emplace_back(index, j);
+  // Starts a fresh cache when the camera moved beyond options.visibility_cache_m (or caching is off).
+  void RefreshCache(const Eigen::Vector3d& centre) {
+    if (options.visibility_cache_m > 0 && (centre - cache_centre).norm() < options.visibility_cache_m) return;
+    cache_centre = centre;
+    point_seen.assign(map.points.size(), -1);
+    point_sky.assign(map.points.size(), -1);
+    line_seen.assign(map.lines.size(), -1);
+    line_mid_seen.assign(map.lines.size(), -1);
+    line_sky_samples.assign(map.lines.size(), {});
+  }
+  static bool Cached(int8_t& slot, const auto& compute) {
+    if (slot < 0) slot = compute() ? 1 : 0;
+    return slot == 1;
+  }
+  bool PointSeen(int i, const Eigen::Vector3d& c) { return Cached(point_seen[i], [&] { return Visible(c, map.points[i]); }); }
+  bool PointSky(int i, const Eigen::Vector3d& c) { return Cached(point_sky[i], [&] { return SkyAbove(c, map.points[i]); }); }
+  bool LineMidSeen(int i, const Eigen::Vector3d& c) {
+    return Cached(line_mid_seen[i], [&] { return Visible(c, 0.5 * (map.lines[i].a + map.lines[i].b)); });
+  }
+  bool LineSeen(int i, const Eigen::Vector3d& c) {
+    return Cached(line_seen[i], [&] { return LineMidSeen(i, c) || Visible(c, map.lines[i].a) || Visible(c, map.lines[i].b); });
+  }
+
+  // Known points the filter's pose predicts visible: (map index, predicted pixel).
+  // Corners against the sky come first: nothing else nearby looks like them, while wall feet sit
+  // among objects, people and ground texture.
+  std::vector<std::pair<int, Eigen::Vector2d>> PredictPoints(const PoseEkf& ekf) {
+    std::vector<std::pair<int, Eigen::Vector2d>> skyline, other;
+    const Eigen::Vector3d centre = ekf.world_from_camera().translation;
+    RefreshCache(centre);
+    for (size_t i = 0; i < map.points.size(); ++i) {
+      const std::optional<Eigen::Vector2d> uv = ekf.ProjectPoint(k, map.points[i]);
+      if (!uv || !InImage(k, *uv, kBorder_px) || !PointSeen(static_cast<int>(i), centre)) continue;
+      (PointSky(static_cast<int>(i), centre) ? skyline : other).emplace_back(static_cast<int>(i), *uv);
     }
-    std::erase_if(out, [](const auto& m) { return m.second < 0; });
-    return out;
+    skyline.insert(skyline.end(), other.begin(), other.end());
+    return skyline;
+  }
+
+  // Sampled frame pixels of the predicted model edges, and those on the skyline (the model point
+  // itself is seen and nothing is seen just above it), for the chamfer search.
+  void EdgeSamples(const PoseEkf& ekf, std::vector<Eigen::Vector2d>& samples, std::vector<Eigen::Vector2d>& sky_samples) {
+    const Eigen::Vector3d centre = ekf.world_from_camera().translation;
+    RefreshCache(centre);
+    for (size_t li = 0; li < map.lines.size(); ++li) {
+      const LineFeature& f = map.lines[li];
+      const auto a = ekf.ProjectPoint(k, f.a), b = ekf.ProjectPoint(k, f.b);
+      if (!a || !b || !LineMidSeen(static_cast<int>(li), centre)) continue;
+      const int steps = static_cast<int>(std::min(2000.0, (*b - *a).norm() / kEdgeSample_px));
+      const bool horizontal = std::abs(f.line.direction.z()) < 0.5;
+      std::vector<uint8_t>& sky = line_sky_samples[li];
+      if (horizontal && static_cast<int>(sky.size()) != steps + 1) sky.assign(steps + 1, 2);  // 2: not cast yet
+      for (int i = 0; i <= steps; ++i) {
+        const double s = steps == 0 ? 0.0 : static_cast<double>(i) / steps;
+        const Eigen::Vector2d p = ToFrame(*a + (*b - *a) * s);
+        if (!InImage(k, p, 1)) continue;
+        samples.push_back(p);
+        if (!horizontal) continue;
+        if (sky[i] == 2) {
+          const Eigen::Vector3d x = f.a + (f.b - f.a) * s;
+          sky[i] = Visible(centre, x) && SkyAbove(centre, x);
+        }
+        if (sky[i]) sky_samples.push_back(p);
+      }
+    }
   }
 
   // The longest detected segment along the predicted image of line feature `f`; nullopt if none.
@@ -258,12 +272,13 @@ struct VisionTracker::Impl {
     return t.point.allFinite();
   }
 
-  Track NewTrack(const PoseEkf& ekf, const cv::Point2f& px, const Eigen::Vector2d& uv) const {
+  Track NewTrack(const PoseEkf& ekf, const cv::Point2f& px, const Eigen::Vector2d& uv) {
     const Rigid3d pose = ekf.world_from_camera();
     const Eigen::Vector3d ray = pose.rotation * PixelRay(k, uv);
     const double d0 = options.new_point_prior_depth_m;
     const double across = d0 * 2.0 / k.fx;  // two pixels at the prior depth
     Track t;
+    t.id = next_track_id++;
     t.px = px;
     t.uv = uv;
     t.point = pose.translation + d0 * ray;
@@ -296,156 +311,360 @@ std::vector<Eigen::Vector3d> VisionTracker::VisiblePoints(const Rigid3d& world_f
   return out;
 }
 
+namespace {
+
+// Counts one feature update: used, or rejected with its reason.
+void Count(const UpdateResult& r, int& used, VisionFrameStats& stats) {
+  if (r.accepted()) {
+    ++used;
+    return;
+  }
+  ++stats.rejected;
+  switch (r.rejection) {
+    case Rejection::kGate: ++stats.rejected_gate; break;
+    case Rejection::kBehindCamera: ++stats.rejected_behind; break;
+    default: ++stats.rejected_not_finite; break;
+  }
+}
+
+}  // namespace
+
 VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height, PoseEkf& ekf) {
   Impl& m = *impl_;
   VisionFrameStats stats;
   if (m.options.max_features == 0 || width != m.k.width || height != m.k.height || !ekf.initialized()) return stats;
-  const Clock::time_point t0 = Clock::now();
+  StageTimer timer(stats);
   const cv::Mat image(height, width, CV_8UC3, const_cast<uint8_t*>(bgr));
   cv::Mat gray;
   cv::cvtColor(image, gray, cv::COLOR_BGR2GRAY);
-  std::vector<cv::Point2f> frame_corners;
-  cv::goodFeaturesToTrack(gray, frame_corners, 1500, 0.005, 3);
-  if (!frame_corners.empty()) {
-    cv::cornerSubPix(gray, frame_corners, cv::Size(4, 4), cv::Size(-1, -1),
-                     cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 20, 0.03));
-  }
-  const std::vector<cv::Point2f> corners = m.ToIdeal(frame_corners);  // where the filter measures
-  std::vector<Segment> segments;
-  if (m.options.use_lines) {
-    std::vector<cv::Vec4f> lines;
-    cv::createLineSegmentDetector(cv::LSD_REFINE_STD)->detect(gray, lines);
-    std::vector<cv::Point2f> ends;
-    for (const cv::Vec4f& l : lines) ends.insert(ends.end(), {cv::Point2f(l[0], l[1]), cv::Point2f(l[2], l[3])});
-    ends = m.ToIdeal(ends);
-    for (size_t i = 0; i + 1 < ends.size(); i += 2) {
-      segments.push_back({Eigen::Vector2d(ends[i].x, ends[i].y), Eigen::Vector2d(ends[i + 1].x, ends[i + 1].y)});
-    }
-  }
-  // Unknown features: follow last frame's tracks (pyramidal Lucas-Kanade).
-  if (m.options.use_new_points && !m.tracks.empty() && !m.previous_gray.empty()) {
-    std::vector<cv::Point2f> before, after;
-    for (const Track& t : m.tracks) before.push_back(t.px);
+  timer.Lap(kStageGray);
+
+  // 1. KLT: known features matched on the last keyframe and unknown features, from their
+  // projection with the filter's predicted pose (the unknown ones from their 3D estimate).
+  const cv::Size window(m.options.klt_window_px, m.options.klt_window_px);
+  std::vector<cv::Mat> pyramid;
+  cv::buildOpticalFlowPyramid(gray, pyramid, window, m.options.klt_levels);
+  const bool track_unknown = m.options.use_new_points && !m.previous_pyramid.empty();
+  auto predicted_px = [&](const Eigen::Vector3d& p, const cv::Point2f& fallback) {
+    const std::optional<Eigen::Vector2d> uv = ekf.ProjectPoint(m.k, p);
+    if (!uv) return fallback;
+    const Eigen::Vector2d f = m.ToFrame(*uv);
+    return InImage(m.k, f, 0) ? cv::Point2f(static_cast<float>(f.x()), static_cast<float>(f.y())) : fallback;
+  };
+  auto klt = [&](const std::vector<cv::Mat>& from, const std::vector<cv::Point2f>& before, std::vector<cv::Point2f>& after) {
     std::vector<uchar> status;
     std::vector<float> error;
-    cv::calcOpticalFlowPyrLK(m.previous_gray, gray, before, after, status, error, cv::Size(15, 15), 2);
+    cv::calcOpticalFlowPyrLK(from, pyramid, before, after, status, error, window, m.options.klt_levels,
+                             cv::TermCriteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 20, 0.03), cv::OPTFLOW_USE_INITIAL_FLOW);
+    std::vector<bool> ok(before.size());
+    for (size_t i = 0; i < before.size(); ++i) {
+      ok[i] = status[i] && InImage(m.k, Eigen::Vector2d(after[i].x, after[i].y), kBorder_px);
+      stats.klt_lost += !ok[i];
+    }
+    return ok;
+  };
+  // Known features: from the keyframe's image to this one (no drift accumulates), started at
+  // their projection with the filter's predicted pose.
+  if (!m.keyframe_pyramid.empty() && !m.known.empty()) {
+    std::vector<cv::Point2f> before, after;
+    for (const KnownTrack& t : m.known) {
+      before.push_back(t.key_px);
+      after.push_back(predicted_px(m.map.points[t.index], t.px));
+    }
+    const std::vector<bool> ok = klt(m.keyframe_pyramid, before, after);
+    std::vector<KnownTrack> known;
+    for (size_t i = 0; i < m.known.size(); ++i)
+      if (ok[i]) known.push_back({m.known[i].index, after[i], m.known[i].key_px});
+    m.known = std::move(known);
+  }
+  // Unknown features: frame to frame, started at the projection of their 3D estimate.
+  if (track_unknown && !m.tracks.empty()) {
+    std::vector<cv::Point2f> before, after;
+    for (const Track& t : m.tracks) {
+      before.push_back(t.px);
+      after.push_back(predicted_px(t.point, t.px));
+    }
+    const std::vector<bool> ok = klt(m.previous_pyramid, before, after);
     const std::vector<cv::Point2f> after_ideal = m.ToIdeal(after);
     std::vector<Track> kept;
     for (size_t i = 0; i < m.tracks.size(); ++i) {
-      if (!status[i] || !InImage(m.k, Eigen::Vector2d(after[i].x, after[i].y), kBorder_px)) continue;
+      if (!ok[i]) {
+        ekf.RemoveLandmark(m.tracks[i].id);
+        continue;
+      }
       m.tracks[i].px = after[i];
       m.tracks[i].uv = Eigen::Vector2d(after_ideal[i].x, after_ideal[i].y);
       kept.push_back(m.tracks[i]);
     }
     m.tracks = std::move(kept);
+  } else if (!track_unknown) {
+    for (const Track& t : m.tracks) ekf.RemoveLandmark(t.id);
+    m.tracks.clear();
   }
+  stats.known_tracked = static_cast<int>(m.known.size());
+  timer.Lap(kStageKlt);
 
-  // Coarse pass on a copy of the filter: the image offset that lays the predicted model edges on
-  // the frame's edges (chamfer), then points matched within a few pixels of prediction + offset;
-  // the copy's updated pose re-predicts everything for the fine pass.
-  std::vector<std::pair<int, Eigen::Vector2d>> predicted = m.PredictPoints(ekf);
-  stats.points_predicted = static_cast<int>(predicted.size());
-  cv::Mat edges, edge_distance;
-  cv::Canny(gray, edges, 60, 180);
-  cv::distanceTransform(255 - edges, edge_distance, cv::DIST_L2, 3);
-  // The skyline: in each column, the first edge pixel from the top.
-  cv::Mat skyline(edges.size(), CV_8U, cv::Scalar(255)), skyline_distance;
-  for (int u = 0; u < edges.cols; ++u) {
-    for (int v = 0; v < edges.rows; ++v) {
-      if (edges.at<uint8_t>(v, u)) {
-        skyline.at<uint8_t>(v, u) = 0;
-        break;
-      }
+  // 2. Between keyframes: the innovation test of the tracked known features against the
+  // prediction decides whether the lock holds.
+  std::vector<Eigen::Vector2d> known_uv;
+  bool keyframe = ++m.frames_since_keyframe >= m.options.keyframe_interval || m.previous_pyramid.empty() ||
+                  m.good_full_matches < m.options.lock_frames;
+  if (!keyframe) {
+    std::vector<cv::Point2f> raw;
+    for (const KnownTrack& t : m.known) raw.push_back(t.px);
+    if (m.options.refine_tracked_corners && !raw.empty()) {
+      cv::cornerSubPix(gray, raw, cv::Size(4, 4), cv::Size(-1, -1), cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 10, 0.03));
+      for (size_t i = 0; i < raw.size(); ++i) m.known[i].px = raw[i];
     }
-  }
-  cv::distanceTransform(skyline, skyline_distance, cv::DIST_L2, 3);
-  std::vector<Eigen::Vector2d> samples, sky_samples;
-  {
-    const Eigen::Vector3d centre = ekf.world_from_camera().translation;
-    for (const LineFeature& f : m.map.lines) {
-      const auto a = ekf.ProjectPoint(m.k, f.a), b = ekf.ProjectPoint(m.k, f.b);
-      if (!a || !b || !m.Visible(centre, 0.5 * (f.a + f.b))) continue;
-      const int steps = static_cast<int>(std::min(2000.0, (*b - *a).norm() / kEdgeSample_px));
-      const bool horizontal = std::abs(f.line.direction.z()) < 0.5;
-      for (int i = 0; i <= steps; ++i) {
-        const double s = steps == 0 ? 0.0 : static_cast<double>(i) / steps;
-        const Eigen::Vector2d p = m.ToFrame(*a + (*b - *a) * s);
-        if (!InImage(m.k, p, 1)) continue;
-        samples.push_back(p);
-        // On the skyline: the model point itself is seen and nothing is seen just above it.
-        const Eigen::Vector3d x = f.a + (f.b - f.a) * s;
-        if (horizontal && m.Visible(centre, x) && m.SkyAbove(centre, x)) sky_samples.push_back(p);
-      }
+    for (const cv::Point2f& p : m.ToIdeal(raw)) known_uv.emplace_back(p.x, p.y);
+    int gated = 0;
+    double pose_sigma_px = 0;  // the pose's own projected uncertainty, summed over the tracks
+    const double var = ekf.options().pixel_sigma_px * ekf.options().pixel_sigma_px;
+    for (size_t i = 0; i < m.known.size(); ++i) {
+      Eigen::Matrix<double, 2, 12> J;
+      const std::optional<Eigen::Vector2d> h = ekf.ProjectPoint(m.k, m.map.points[m.known[i].index], &J);
+      const Eigen::Matrix2d JPJ = J * ekf.covariance() * J.transpose();
+      const Eigen::Matrix2d S = JPJ + var * Eigen::Matrix2d::Identity();
+      const Eigen::Vector2d r = h ? Eigen::Vector2d(known_uv[i] - *h) : Eigen::Vector2d::Constant(1e9);
+      gated += !(r.dot(S.ldlt().solve(r)) <= ekf.options().gate_chi2_2dof);
+      pose_sigma_px += std::sqrt(std::max(0.0, 0.5 * JPJ.trace()));
     }
+    const int n = static_cast<int>(m.known.size());
+    stats.weak_lock = n < m.options.min_tracked_known || gated > m.options.weak_lock_gated_share * n ||
+                      pose_sigma_px > m.options.lock_sigma_px * n;
+    keyframe = stats.weak_lock;
+    timer.Lap(kStageMatch);
   }
-  const Eigen::Vector2d offset = ChamferOffset(edge_distance, samples, skyline_distance, sky_samples, m.options.search_radius_px);
-  stats.coarse_offset_px = offset;
-  stats.detect_ms = MsSince(t0);
-  const Clock::time_point t1 = Clock::now();
-  PoseEkf coarse = ekf;
-  for (const auto& [index, j] : Impl::MatchPoints(predicted, corners, offset, kCoarseMatch_px)) {
-    (void)coarse.UpdatePoint(m.k, m.map.points[index], Eigen::Vector2d(corners[j].x, corners[j].y));
-  }
-  double update_ms = MsSince(t1);
+  stats.keyframe = keyframe;
 
-  // Fine pass on the filter itself: known points, then lines, then converged unknown points.
-  const Clock::time_point t2 = Clock::now();
-  predicted.clear();
-  for (auto& p : m.PredictPoints(coarse)) predicted.push_back(p);
-  const std::vector<std::pair<int, int>> matches = Impl::MatchPoints(predicted, corners, Eigen::Vector2d::Zero(), m.options.match_radius_px);
-  std::vector<std::optional<Segment>> line_matches;
-  if (m.options.use_lines) {
-    const Eigen::Vector3d centre = coarse.world_from_camera().translation;
-    for (const LineFeature& f : m.map.lines) {
-      const bool seen = m.Visible(centre, 0.5 * (f.a + f.b)) || m.Visible(centre, f.a) || m.Visible(centre, f.b);
-      line_matches.push_back(seen ? m.MatchLine(coarse, f, segments) : std::nullopt);
-    }
-  }
-  stats.detect_ms += MsSince(t2);
-  const Clock::time_point t3 = Clock::now();
+  std::vector<cv::Point2f> frame_corners, corners;  // keyframes: detected corners (frame, ideal pixels)
+  std::vector<std::pair<int, Eigen::Vector2d>> predicted;
   int budget = m.options.max_features;
-  auto count = [&](const UpdateResult& r, int& used) {
-    --budget;
-    if (r.accepted()) {
-      ++used;
-    } else {
-      ++stats.rejected;
+  if (!keyframe) {
+    // 3a. Tracked known features update the filter; a rejected one is dropped.
+    std::vector<KnownTrack> kept;
+    for (size_t i = 0; i < m.known.size(); ++i) {
+      const Eigen::Vector3d& p = m.map.points[m.known[i].index];
+      stats.point_matches.emplace_back(p, known_uv[i]);
+      if (budget <= 0) continue;
+      --budget;
+      const UpdateResult r = ekf.UpdatePoint(m.k, p, known_uv[i], m.options.tracked_sigma_px * m.options.tracked_sigma_px);
+      Count(r, stats.points_used, stats);
+      if (r.accepted()) kept.push_back(m.known[i]);
     }
-  };
-  for (const auto& [index, j] : matches) {
-    stats.point_matches.emplace_back(m.map.points[index], Eigen::Vector2d(corners[j].x, corners[j].y));
-    if (budget <= 0) continue;
-    count(ekf.UpdatePoint(m.k, m.map.points[index], Eigen::Vector2d(corners[j].x, corners[j].y)), stats.points_used);
+    m.known = std::move(kept);
+    timer.Lap(kStageEkf);
+    // 3a'. Lines matched on the keyframe: the edge near each predicted line (1D searches along
+    // its normal), a line fitted through what was found, then the line update; a rejected line is dropped.
+    std::vector<int> lines_kept;
+    for (const int li : m.known_lines) {
+      if (budget <= 0 || !m.options.track_lines) break;
+      const LineFeature& f = m.map.lines[li];
+      const std::optional<Eigen::Vector2d> pa = ekf.ProjectPoint(m.k, f.a), pb = ekf.ProjectPoint(m.k, f.b);
+      if (!pa || !pb || (*pb - *pa).norm() < kMinSegment_px) continue;
+      const Eigen::Vector2d dir = (*pb - *pa).normalized(), normal(-dir.y(), dir.x());
+      std::vector<Eigen::Vector2d> samples;
+      constexpr int kSamples = 12;
+      for (int i = 0; i < kSamples; ++i) {
+        const Eigen::Vector2d ideal = *pa + (*pb - *pa) * ((i + 0.5) / kSamples);
+        if (InImage(m.k, ideal, kBorder_px)) samples.push_back(m.ToFrame(ideal));
+      }
+      timer.Lap(kStageMatch);
+      std::vector<cv::Point2f> found = m.ToIdeal(SearchEdge(gray, samples, normal, m.options.match_radius_px + 1, 12.0));
+      timer.Lap(kStageSegments);
+      if (found.size() < 4) continue;
+      cv::Vec4f fit;
+      cv::fitLine(found, fit, cv::DIST_HUBER, 0, 0.01, 0.01);
+      const Eigen::Vector2d d(fit[0], fit[1]), o(fit[2], fit[3]);
+      auto on_line = [&](const cv::Point2f& p) { return Eigen::Vector2d(o + d * d.dot(Eigen::Vector2d(p.x, p.y) - o)); };
+      timer.Lap(kStageMatch);
+      --budget;
+      const UpdateResult r = ekf.UpdateLine(m.k, f.line, on_line(found.front()), on_line(found.back()), m.options.tracked_sigma_px * m.options.tracked_sigma_px);
+      Count(r, stats.lines_used, stats);
+      if (r.accepted()) lines_kept.push_back(li);
+      timer.Lap(kStageEkf);
+    }
+    m.known_lines = std::move(lines_kept);
+  } else {
+    // 3b. Keyframe: full model matching, coarse to fine.
+    m.frames_since_keyframe = 0;
+    cv::goodFeaturesToTrack(gray, frame_corners, 1500, 0.005, 3);
+    if (!frame_corners.empty()) {
+      cv::cornerSubPix(gray, frame_corners, cv::Size(4, 4), cv::Size(-1, -1),
+                       cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 20, 0.03));
+    }
+    corners = m.ToIdeal(frame_corners);  // where the filter measures
+    timer.Lap(kStageCorners);
+    std::vector<Segment> segments;
+    if (m.options.use_lines) {
+      std::vector<cv::Vec4f> lines;
+      cv::createLineSegmentDetector(cv::LSD_REFINE_STD)->detect(gray, lines);
+      std::vector<cv::Point2f> ends;
+      for (const cv::Vec4f& l : lines) ends.insert(ends.end(), {cv::Point2f(l[0], l[1]), cv::Point2f(l[2], l[3])});
+      ends = m.ToIdeal(ends);
+      for (size_t i = 0; i + 1 < ends.size(); i += 2) {
+        segments.push_back({Eigen::Vector2d(ends[i].x, ends[i].y), Eigen::Vector2d(ends[i + 1].x, ends[i + 1].y)});
+      }
+    }
+    timer.Lap(kStageSegments);
+    // Coarse pass on a copy of the filter: the image offset that lays the predicted model edges on
+    // the frame's edges (chamfer), then points matched within a few pixels of prediction + offset;
+    // the copy's updated pose re-predicts everything for the fine pass.
+    predicted = m.PredictPoints(ekf);
+    stats.points_predicted = static_cast<int>(predicted.size());
+    std::vector<Eigen::Vector2d> samples, sky_samples;
+    m.EdgeSamples(ekf, samples, sky_samples);
+    timer.Lap(kStageVisibility);
+    cv::Mat edge_distance, skyline_distance;
+    EdgeDistances(gray, edge_distance, skyline_distance);
+    timer.Lap(kStageEdges);
+    const Eigen::Vector2d offset = ChamferOffset(edge_distance, samples, skyline_distance, sky_samples, m.options.search_radius_px);
+    stats.coarse_offset_px = offset;
+    timer.Lap(kStageChamfer);
+    const std::vector<std::pair<int, int>> coarse_matches = MatchPoints(predicted, corners, offset, kCoarseMatch_px);
+    timer.Lap(kStageMatch);
+    PoseEkf coarse = ekf;
+    for (const auto& [index, j] : coarse_matches) {
+      (void)coarse.UpdatePoint(m.k, m.map.points[index], Eigen::Vector2d(corners[j].x, corners[j].y));
+    }
+    timer.Lap(kStageEkf);
+
+    // Fine pass on the filter itself: known points, then lines, then converged unknown points.
+    predicted = m.PredictPoints(coarse);
+    std::vector<bool> line_seen(m.map.lines.size(), false);
+    if (m.options.use_lines) {
+      const Eigen::Vector3d centre = coarse.world_from_camera().translation;
+      for (size_t i = 0; i < m.map.lines.size(); ++i) line_seen[i] = m.LineSeen(static_cast<int>(i), centre);
+    }
+    timer.Lap(kStageVisibility);
+    const std::vector<std::pair<int, int>> matches = MatchPoints(predicted, corners, Eigen::Vector2d::Zero(), m.options.match_radius_px);
+    std::vector<std::optional<Segment>> line_matches(m.map.lines.size());
+    for (size_t i = 0; i < m.map.lines.size(); ++i) {
+      if (line_seen[i]) line_matches[i] = m.MatchLine(coarse, m.map.lines[i], segments);
+    }
+    timer.Lap(kStageMatch);
+    m.known.clear();
+    for (const auto& [index, j] : matches) {
+      const Eigen::Vector2d uv(corners[j].x, corners[j].y);
+      stats.point_matches.emplace_back(m.map.points[index], uv);
+      if (budget <= 0) continue;
+      --budget;
+      const UpdateResult r = ekf.UpdatePoint(m.k, m.map.points[index], uv);
+      Count(r, stats.points_used, stats);
+      if (r.accepted()) m.known.push_back({index, frame_corners[j], frame_corners[j]});
+    }
+    m.known_lines.clear();
+    for (size_t i = 0; i < line_matches.size() && budget > 0; ++i) {
+      if (!line_matches[i]) continue;
+      --budget;
+      const UpdateResult r = ekf.UpdateLine(m.k, m.map.lines[i].line, line_matches[i]->a, line_matches[i]->b);
+      Count(r, stats.lines_used, stats);
+      if (r.accepted()) m.known_lines.push_back(static_cast<int>(i));
+    }
+    // The lock: enough features applied and few rejected; tracking resumes after lock_frames of these.
+    const int applied = stats.points_used + stats.lines_used, tried = applied + stats.rejected;
+    const bool good = applied >= m.options.min_tracked_known && stats.rejected <= m.options.weak_lock_gated_share * tried;
+    m.good_full_matches = good ? m.good_full_matches + 1 : 0;
+    m.bad_full_matches = good ? 0 : m.bad_full_matches + 1;
+    if (m.options.lost_frames > 0 && m.bad_full_matches >= m.options.lost_frames) {
+      ekf.InflatePose(0.5, m.options.lost_orientation_sigma_deg * 3.14159265358979323846 / 180);
+      m.bad_full_matches = 0;
+      ++stats.relocks;
+    }
+    timer.Lap(kStageEkf);
   }
-  for (size_t i = 0; i < line_matches.size() && budget > 0; ++i) {
-    if (line_matches[i]) count(ekf.UpdateLine(m.k, m.map.lines[i].line, line_matches[i]->a, line_matches[i]->b), stats.lines_used);
-  }
+
+  // 4. Unknown features.
   if (m.options.use_new_points) {
+    // Joint mode: the features in the filter's state update pose and structure together; one that
+    // disagrees leaves the state and is dropped.
+    std::vector<bool> drop(m.tracks.size(), false);
+    if (m.options.joint_new_points) {
+      for (size_t i = 0; i < m.tracks.size(); ++i) {
+        Track& t = m.tracks[i];
+        if (!ekf.HasLandmark(t.id)) continue;
+        const UpdateResult r = ekf.UpdateLandmark(m.k, t.id, t.uv);
+        Count(r, stats.new_points_used, stats);
+        if (!r.accepted()) {
+          ekf.RemoveLandmark(t.id);
+          drop[i] = true;
+        }
+      }
+      for (Track& t : m.tracks) {
+        if (const auto l = ekf.Landmark(t.id)) {
+          t.point = l->first;
+          t.covariance = l->second;
+          ++t.observations;
+        }
+      }
+    }
     for (Track& t : m.tracks) {
-      if (budget <= 0 || !m.options.new_points_in_pose) break;
+      if (budget <= 0 || !m.options.new_points_in_pose || m.options.joint_new_points) break;
       if (t.observations < 5 || t.LargestSigma() > m.options.new_point_sigma_m) continue;
       Eigen::Matrix<double, 2, 12> J;
       if (!ekf.ProjectPoint(m.k, t.point, &J)) continue;
       const Eigen::Matrix<double, 2, 3> H = -J.block<2, 3>(0, kPos);
       const double extra = 0.5 * (H * t.covariance * H.transpose()).trace();
-      count(ekf.UpdatePoint(m.k, t.point, t.uv, extra), stats.new_points_used);
+      --budget;
+      Count(ekf.UpdatePoint(m.k, t.point, t.uv, extra), stats.new_points_used, stats);
     }
-    // Prediction-correction of every unknown point's structure with the corrected pose.
-    std::erase_if(m.tracks, [&](Track& t) { return !m.RefineTrack(t, ekf, t.uv); });
-    // New tracks on corners far from known predictions and existing tracks.
-    for (size_t j = 0; j < corners.size(); ++j) {
-      if (static_cast<int>(m.tracks.size()) >= m.options.max_new_points) break;
-      const Eigen::Vector2d uv(corners[j].x, corners[j].y);
-      bool near = false;
-      for (const auto& p : predicted) near |= (p.second - uv).squaredNorm() < 100;
-      for (const Track& t : m.tracks) near |= (t.uv - uv).squaredNorm() < 100;
-      if (!near) m.tracks.push_back(m.NewTrack(ekf, frame_corners[j], uv));
+    // Prediction-correction of every other unknown point's structure with the corrected pose.
+    const size_t before = m.tracks.size();
+    for (size_t i = 0; i < m.tracks.size(); ++i) {
+      if (!drop[i] && !ekf.HasLandmark(m.tracks[i].id)) drop[i] = !m.RefineTrack(m.tracks[i], ekf, m.tracks[i].uv);
+    }
+    std::vector<Track> kept;
+    for (size_t i = 0; i < m.tracks.size(); ++i)
+      if (!drop[i]) kept.push_back(m.tracks[i]);
+    m.tracks = std::move(kept);
+    stats.unknown_dropped = static_cast<int>(before - m.tracks.size());
+    if (m.options.joint_new_points) {  // converged features join the state while there is room
+      for (const Track& t : m.tracks) {
+        if (ekf.landmark_count() >= m.options.max_state_points) break;
+        if (ekf.HasLandmark(t.id) || t.observations < 5 || t.LargestSigma() > m.options.new_point_sigma_m) continue;
+        ekf.AddLandmark(t.id, t.point, t.covariance);
+      }
+    }
+    // New tracks only where the tracked set (known and unknown) is thin: a grid mask.
+    CellGrid grid(width, height, m.options.grid_cell_px);
+    for (const KnownTrack& t : m.known) grid.Add(t.px.x, t.px.y);
+    for (const Track& t : m.tracks) grid.Add(t.px.x, t.px.y);
+    for (const auto& p : predicted) grid.Add(p.second.x(), p.second.y());
+    if (static_cast<int>(m.tracks.size()) < m.options.max_new_points) {
+      if (!keyframe) {
+        // Between keyframes: corners on a coarser pyramid level inside the thin cells only, then
+        // refined to sub-pixel on the full image.
+        const int level_index = std::min(m.options.detect_level, m.options.klt_levels);  // buildOpticalFlowPyramid: image, derivatives, ...
+        const int scale = 1 << level_index;
+        const cv::Mat level = level_index == 0 ? gray : pyramid[2 * level_index];
+        const cv::Mat mask = grid.ThinMask(m.options.grid_min_tracks, scale);
+        if (level.size() == mask.size() && cv::countNonZero(mask) > 0) {
+          cv::goodFeaturesToTrack(level, frame_corners, m.options.max_new_points - static_cast<int>(m.tracks.size()), 0.01, 10.0 / scale, mask);
+          for (cv::Point2f& p : frame_corners) p *= static_cast<float>(scale);
+          if (!frame_corners.empty()) {
+            cv::cornerSubPix(gray, frame_corners, cv::Size(4, 4), cv::Size(-1, -1),
+                             cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 10, 0.05));
+          }
+          corners = m.ToIdeal(frame_corners);
+        }
+      }
+      for (size_t j = 0; j < corners.size() && static_cast<int>(m.tracks.size()) < m.options.max_new_points; ++j) {
+        if (grid.Count(frame_corners[j].x, frame_corners[j].y) >= m.options.grid_min_tracks) continue;
+        bool near = false;
+        for (const Track& t : m.tracks) near |= (t.uv - Eigen::Vector2d(corners[j].x, corners[j].y)).squaredNorm() < 100;
+        for (const KnownTrack& t : m.known) near |= std::hypot(t.px.x - frame_corners[j].x, t.px.y - frame_corners[j].y) < 10;
+        if (near) continue;
+        m.tracks.push_back(m.NewTrack(ekf, frame_corners[j], Eigen::Vector2d(corners[j].x, corners[j].y)));
+        grid.Add(frame_corners[j].x, frame_corners[j].y);
+      }
     }
     stats.new_points_tracked = static_cast<int>(m.tracks.size());
     for (const Track& t : m.tracks) stats.new_points_converged += t.observations >= 5 && t.LargestSigma() <= m.options.new_point_sigma_m;
+    timer.Lap(kStageUnknown);
   }
-  stats.update_ms = update_ms + MsSince(t3);
-  m.previous_gray = gray;
+  if (keyframe) m.keyframe_pyramid = pyramid;  // shares the pixels
+  m.previous_pyramid = std::move(pyramid);
+  for (int s = 0; s < kVisionStageCount; ++s) (s == kStageEkf || s == kStageUnknown ? stats.update_ms : stats.detect_ms) += stats.stage_ms[s];
   return stats;
 }
 

@@ -6,6 +6,7 @@
 // (pyramidal KLT) and their 3D position estimated as tracking goes, each by its own small
 // prediction-correction filter, and join the pose update once converged (docs/POSE.md).
 // OpenCV stays inside vision.cc.
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -47,12 +48,54 @@ struct VisionOptions {
   // cross-correlations (not kept here) their errors feed back into the pose, which then drifts
   // (ave-bench pose shows the row; docs/BENCHMARKS.md).
   bool new_points_in_pose = false;
+  // Converged unknown features join the pose filter's state (PoseEkf::AddLandmark) and are from
+  // then on estimated jointly with the pose, cross-covariances kept, up to max_state_points at a
+  // time; their observations then correct the pose without the drift above (issue 19).
+  bool joint_new_points = false;
+  int max_state_points = 15;
   int max_new_points = 150;       // tracked unknown features kept
   double new_point_sigma_m = 0.3; // an unknown feature is used for pose once its largest sigma is below this
   double new_point_prior_depth_m = 20;  // depth prior of a fresh unknown feature (sigma the same)
 
+  // Video-rate front end (issue 19). Between keyframes the known features matched on the last
+  // keyframe are followed by KLT from the pose filter's prediction and update the filter directly;
+  // the expensive model matching (corners + sub-pixel, segments, Canny + distance transforms,
+  // chamfer/sky-line alignment, coarse and fine passes) runs only on keyframes.
+  int keyframe_interval = 10;     // full model matching at least every N frames (1: every frame, the issue-5 front end)
+  int lost_frames = 10;           // this many consecutive badly fitting full matches: the pose is lost, its covariance inflated
+  double lost_orientation_sigma_deg = 1.0;  // ... by this orientation sigma (and 0.5 m of position sigma)
+  int lock_frames = 15;           // tracking between keyframes only after this many consecutive well-fitting full matches
+  double tracked_sigma_px = 1.5;  // extra noise of a tracked (not re-detected) feature: its error persists from frame to frame
+  int min_tracked_known = 8;      // fewer tracked known features than this: full matching now (weak lock)
+  double weak_lock_gated_share = 0.25;
+  double lock_sigma_px = 1.0;     // the pose's projected uncertainty at the tracked features above this (px, mean): full matching now  // more than this share of tracked known features outside the gate: full matching now
+  double visibility_cache_m = 1.0;  // reuse per-feature ray-cast visibility while the camera stays this close (0: cast every time)
+  bool track_lines = false;       // between keyframes, follow the keyframe's matched lines by 1D edge search (off: it locks onto window rows)
+  bool refine_tracked_corners = false;  // re-snap tracked known corners with cornerSubPix every frame (drifts along edges: off)
+  int klt_window_px = 15;         // KLT window (pyramid levels: klt_levels)
+  int klt_levels = 2;
+  int grid_cell_px = 80;          // new unknown-feature corners only in cells with fewer tracks than grid_min_tracks
+  int grid_min_tracks = 3;
+  int detect_level = 1;           // pyramid level new unknown-feature corners are detected on between keyframes (0: full size)
+
   std::string Check() const;
 };
+
+// Stages of the vision front end, timed in thread CPU time (VisionFrameStats::stage_ms).
+enum VisionStage : int {
+  kStageGray = 0,      // BGR -> grey
+  kStageCorners,       // Shi-Tomasi corners + sub-pixel refinement (+ undistortion)
+  kStageSegments,      // LSD line segments
+  kStageEdges,         // Canny + edge and skyline distance transforms
+  kStageChamfer,       // coarse alignment search (chamfer + skyline)
+  kStageKlt,           // pyramid + pyramidal Lucas-Kanade of known and unknown tracks
+  kStageVisibility,    // predicting features and ray casting the static mesh for visibility
+  kStageMatch,         // point / segment association
+  kStageEkf,           // pose filter updates (both passes on keyframes)
+  kStageUnknown,       // unknown-feature structure filters and new tracks
+  kVisionStageCount
+};
+const char* VisionStageName(int stage);
 
 struct VisionFrameStats {
   int points_predicted = 0;  // known points predicted visible
@@ -62,6 +105,15 @@ struct VisionFrameStats {
   Eigen::Vector2d coarse_offset_px = Eigen::Vector2d::Zero();  // the coarse pass's image shift
   double detect_ms = 0;      // corner/segment detection, KLT tracking, matching
   double update_ms = 0;      // EKF updates (both passes) and unknown-feature filters
+  std::array<double, kVisionStageCount> stage_ms{};  // thread CPU ms per stage (detect_ms + update_ms in wall time)
+  bool keyframe = false;     // full model matching ran on this frame
+  bool weak_lock = false;    // ... because the tracked known features disagreed with the prediction
+  int relocks = 0;           // the pose was declared lost (lost_frames) and its covariance inflated
+  int known_tracked = 0;     // known features followed by KLT into this frame
+  // Why measurements did not update the pose (counted per feature).
+  int rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0;
+  int klt_lost = 0;          // tracks KLT lost (status 0 or left the image)
+  int unknown_dropped = 0;   // unknown features whose observation fell outside their gate
   // The fine pass's known-point matches (model point, detected pixel), e.g. for a PnP peer.
   std::vector<std::pair<Eigen::Vector3d, Eigen::Vector2d>> point_matches;
   int features_used() const { return points_used + lines_used + new_points_used; }

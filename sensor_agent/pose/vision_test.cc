@@ -94,11 +94,94 @@ TEST_F(VisionTest, StabilisesAPerturbedBackpackPoseToAFewPixels) {
   EXPECT_TRUE(ekf.world_from_camera().translation.isApprox(pose.translation));
 }
 
+// Issue 19: between keyframes the known features follow by KLT from the predicted pose and keep
+// the pose registered; a frame without features changes nothing; a frame bumped by 5° (its
+// matches all disagree with the prediction) does not pull the pose, and the next frame re-locks.
+TEST_F(VisionTest, VideoRateTrackingHoldsTheLockAndRefusesABlankAndABumpedFrame) {
+  const scene::CameraSpec& camera = *scenario_->world.FindCamera("backpack");
+  const PinholeIntrinsics& k = camera.intrinsics;
+  const sim::SimulatedCamera sim_camera(scenario_->world, camera, scenario_->EffectsForCamera("backpack"), scenario_->seed);
+  VisionOptions options;
+  options.keyframe_interval = 10;
+  options.lock_frames = 3;  // full matching on the first three frames, then tracking
+  options.lock_sigma_px = 4;  // no AHRS here: the constant-velocity prediction alone is uncertain by ~2 px
+  VisionTracker vision(CampusFeatureMap(scenario_->world), scene::BuildStaticMesh(scenario_->world, 2.0), k, options);
+  PoseEkf ekf;
+  const int first = 120;
+  const Rigid3d start = sim_camera.PoseAt(first / 30.0);
+  ekf.Initialize(static_cast<int64_t>(std::llround(first * 1e9 / 30)),
+                 Rigid3d(SO3Exp(Eigen::Vector3d(0.3 * kDeg, -0.4 * kDeg, 0.2 * kDeg)) * start.rotation, start.translation + Eigen::Vector3d(0.2, -0.1, 0)),
+                 0.5, 1 * kDeg);
+  int keyframes = 0, tracked_frames = 0;
+  auto step = [&](int f, sim::SimImage& frame) {
+    EXPECT_TRUE(ekf.Predict(static_cast<int64_t>(std::llround(f * 1e9 / 30))).accepted());
+    const VisionFrameStats s = vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
+    keyframes += s.keyframe;
+    if (!s.keyframe) {
+      ++tracked_frames;
+      EXPECT_GE(s.known_tracked, options.min_tracked_known) << f;
+      EXPECT_EQ(s.stage_ms[kStageCorners], 0) << "no full-image corner detection between keyframes, frame " << f;
+      EXPECT_EQ(s.stage_ms[kStageSegments], 0) << f;
+    }
+    return s;
+  };
+  for (int f = first; f < first + 14; ++f) {
+    sim::SimImage frame = sim_camera.Frame(f, f / 30.0);
+    step(f, frame);
+    const Rigid3d truth = sim_camera.PoseAt(f / 30.0);
+    EXPECT_LT(MedianMisregistration(k, truth, ekf.world_from_camera(), vision.VisiblePoints(truth)), 1.5) << f;
+  }
+  EXPECT_LE(keyframes, 5);  // frames 0-2 (lock), then every 10th
+  EXPECT_GE(tracked_frames, 9);
+
+  // A frame with no features (lens cap): nothing is applied, nothing becomes NaN.
+  int f = first + 14;
+  sim::SimImage blank = sim_camera.Frame(f, f / 30.0);
+  std::fill(blank.bgr.begin(), blank.bgr.end(), 90);
+  const Rigid3d before_blank = ekf.world_from_camera();
+  const VisionFrameStats b = step(f, blank);
+  EXPECT_EQ(b.features_used(), 0);
+  EXPECT_TRUE(ekf.covariance().allFinite());
+  EXPECT_LT((ekf.world_from_camera().translation - before_blank.translation).norm(), 0.1);  // prediction only
+
+  // A frame bumped by 5° in pitch (rotation-only warp): the matches all disagree; the pose stays.
+  ++f;
+  sim::SimImage bumped = sim_camera.Frame(f, f / 30.0);
+  {
+    cv::Mat view(bumped.height, bumped.width, CV_8UC3, bumped.bgr.data()), warped;
+    const cv::Matx33d K(k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1);
+    cv::Matx33d R;
+    cv::Rodrigues(cv::Vec3d(-5 * kDeg, 0, 0), R);
+    cv::warpPerspective(view, warped, K * R * K.inv(), view.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+    warped.copyTo(view);
+  }
+  const Rigid3d prior = [&] {
+    PoseEkf copy = ekf;
+    copy.Predict(static_cast<int64_t>(std::llround(f * 1e9 / 30)));
+    return copy.world_from_camera();
+  }();
+  const VisionFrameStats bump = step(f, bumped);
+  EXPECT_LT(AngleBetweenDeg(ekf.world_from_camera().rotation, prior.rotation), 0.5) << "the bumped frame pulled the pose";
+  EXPECT_GT(bump.rejected_gate + (bump.keyframe ? 1 : 0), 0);
+  // The next, unbumped frame re-locks.
+  ++f;
+  sim::SimImage after = sim_camera.Frame(f, f / 30.0);
+  step(f, after);
+  const Rigid3d truth = sim_camera.PoseAt(f / 30.0);
+  EXPECT_LT(MedianMisregistration(k, truth, ekf.world_from_camera(), vision.VisiblePoints(truth)), 1.5);
+}
+
 TEST(VisionOptions, CheckNamesTheBadField) {
   VisionOptions o;
   EXPECT_EQ(o.Check(), "");
   o.max_features = -1;
   EXPECT_THAT(o.Check(), ::testing::HasSubstr("max_features"));
+  o = VisionOptions();
+  o.keyframe_interval = 0;
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("keyframe_interval"));
+  o = VisionOptions();
+  o.detect_level = 7;
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("detect_level"));
 }
 
 }  // namespace

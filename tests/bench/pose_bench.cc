@@ -3,9 +3,16 @@
 // names, runs the pose filter in each mode (GPS+inertial only; GPS+inertial+vision with 10, 25,
 // 50, 100 features), projects the static model's known points with each mode's pose and with the
 // true pose, and reports the misregistration in pixels (median, p95, max) next to the time per
-// frame. Peer in the same run: cv::solvePnP (iterative, from the GPS+inertial pose) on the same
+// frame (thread CPU time on one core). Issue 19: the front end's stage table, the knobs of the
+// video-rate front end (keyframe interval, visibility cache, detection level) with the accuracy
+// each costs, NEES of the pose against the chi-square 95 % band, rejection reasons, and two
+// scenario variants (a bus covering half the image, a camera bumped by 5°). Peers in the same run:
+// cv::solvePnP (iterative, from the GPS+inertial pose) and cv::solvePnPRansac on the same
 // known-point matches, frame by frame. Also: how many pixels 1° of orientation error is.
 #include <algorithm>
+#include <array>
+#include <functional>
+#include <map>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -15,12 +22,14 @@
 #include <vector>
 
 #include <Eigen/Core>
+#include <Eigen/Cholesky>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/core/eigen.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "model_store/common/cpu_clock.h"
 #include "sensor_agent/pose/pose_inputs.h"
 #include "sensor_agent/pose/so3.h"
 #include "sensor_agent/pose/vision.h"
@@ -31,8 +40,9 @@
 namespace ave::bench {
 namespace {
 
-using Clock = std::chrono::steady_clock;
+using Clock = ThreadCpuClock;  // CPU time: the machine is shared, wall time is inflated by others
 double MsSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+using WallClock = std::chrono::steady_clock;
 
 struct PoseBenchOptions {
   std::string scenario = "campus";
@@ -41,6 +51,9 @@ struct PoseBenchOptions {
   std::vector<int> features = {0, 10, 25, 50, 100};
   std::string png = "pose_bench.png";
   bool lines = true, new_points = true;
+  double ahrs_correlation_s = 1.0;  // PoseFilterOptions::orientation_correlation_s
+  bool knobs = true;     // the front end's knobs at 50 features
+  bool variants = true;  // the bus and bump scenario variants (need --seconds >= 7.2)
 };
 
 struct Spread {
@@ -54,16 +67,82 @@ Spread SpreadOf(std::vector<double> v) {
   return {at(0.5), at(0.95), v.back()};
 }
 
+// A scene event of a scenario variant: the frames it changes and the windows compared.
+struct Event {
+  std::string name;          // "bus", "bump"
+  double start_s = 0, end_s = 0;
+  double before_s = 1, after_s = 1;  // windows before the start and after the end
+};
+
 struct Row {
   std::string mode;
   int features = 0;
+  std::string knob;          // what differs from the default front end ("" for the default)
+  std::string key;           // JSON key
   std::vector<double> errors_px;         // every visible model point of every frame
   std::vector<double> frame_median_px;   // per frame, for the plot
+  std::vector<double> frame_ms;          // per frame, CPU ms (filter + vision)
   double filter_ms = 0, detect_ms = 0, update_ms = 0, used = 0;
   int frames = 0;
   int matches = 0, matches_within_2px = 0;  // known-point matches and those within 2 px of the true projection
+  std::array<double, pose::kVisionStageCount> stage_ms{};
+  int keyframes = 0, weak_locks = 0, relocks = 0;
+  int64_t rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0, klt_lost = 0, unknown_dropped = 0;
+  int nees_frames = 0, nees_in_band = 0;
+  double nees_sum = 0;
+  const Event* event = nullptr;
+  std::vector<double> before_px, during_px, after_px;  // per-point errors in the event's windows
   double TotalMs() const { return (filter_ms + detect_ms + update_ms) / std::max(1, frames); }
 };
+
+// NEES of the 6-dof pose (position m, world rotation vector rad) against its covariance; inside
+// the two-sided chi-square(6) 95 % band [1.237, 14.449].
+constexpr double kNeesLow = 1.2373, kNeesHigh = 14.4494;
+double PoseNees(const Rigid3d& truth, const pose::PoseSample& estimate) {
+  Eigen::Matrix<double, 6, 1> e;
+  e << truth.translation - estimate.world_from_camera.translation, pose::SO3Log(truth.rotation * estimate.world_from_camera.rotation.conjugate());
+  const Eigen::LDLT<pose::Matrix6d> ldlt(estimate.covariance);
+  return ldlt.info() == Eigen::Success ? e.dot(ldlt.solve(e)) : std::numeric_limits<double>::infinity();
+}
+
+// Scenario variants (issue 19): a bus covering the left half of the image, driving across it for
+// three seconds; a camera bumped by 5° (pitch) for 0.2 s, as a rotation-only warp of the frame
+// (the AHRS on the carrier does not see it). Each returns the changed frame or false.
+cv::Mat BusTexture() {
+  cv::Mat bus(420, 2400, CV_8UC3, cv::Scalar(40, 90, 200));
+  cv::RNG rng(19);
+  for (int x = 20; x < bus.cols - 80; x += 110) {  // windows with sharp corners, people behind some
+    cv::rectangle(bus, cv::Rect(x, 40, 90, 150), cv::Scalar(60, 50, 40), cv::FILLED);
+    if (rng.uniform(0, 2)) cv::circle(bus, {x + rng.uniform(20, 70), 120}, 18, cv::Scalar(rng.uniform(0, 255), 150, 120), cv::FILLED);
+  }
+  for (int i = 0; i < 60; ++i) {  // advertising and dirt: more corners to track
+    const cv::Point a(rng.uniform(0, bus.cols), rng.uniform(220, 400));
+    cv::rectangle(bus, a, a + cv::Point(rng.uniform(10, 60), rng.uniform(5, 30)),
+                  cv::Scalar(rng.uniform(0, 255), rng.uniform(0, 255), rng.uniform(0, 255)), cv::FILLED);
+  }
+  return bus;
+}
+
+bool ApplyEvent(const Event& e, const cv::Mat& bus, const PinholeIntrinsics& k, int frame, double t_s, sim::SimImage& image, Rigid3d& truth) {
+  if (t_s < e.start_s || t_s >= e.end_s) return false;
+  cv::Mat view(image.height, image.width, CV_8UC3, image.bgr.data());
+  if (e.name == "bus") {
+    const int shift = (frame * 12) % (bus.cols - image.width / 2);
+    const int top = image.height - bus.rows;
+    bus(cv::Rect(shift, std::max(0, -top), image.width / 2, std::min(bus.rows, image.height))).copyTo(view(cv::Rect(0, std::max(0, top), image.width / 2, std::min(bus.rows, image.height))));
+    return true;
+  }
+  const Eigen::Quaterniond bump = pose::SO3Exp(Eigen::Vector3d(5 * 3.14159265358979323846 / 180, 0, 0));
+  const Eigen::Matrix3d K = (Eigen::Matrix3d() << k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1).finished();
+  const Eigen::Matrix3d H = K * bump.conjugate().toRotationMatrix() * K.inverse();  // old pixel -> bumped pixel
+  cv::Mat Hcv;
+  cv::eigen2cv(H, Hcv);
+  cv::Mat warped;
+  cv::warpPerspective(view, warped, Hcv, view.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+  warped.copyTo(view);
+  truth = Rigid3d((truth.rotation * bump).normalized(), truth.translation);
+  return true;
+}
 
 // Pixel distances between each model point projected with `estimate` and with `truth`; a point
 // behind the estimated camera counts as the image diagonal.
@@ -80,12 +159,23 @@ void Misregistration(const PinholeIntrinsics& k, const Rigid3d& truth, const Rig
   if (frame_median) frame_median->push_back(frame.empty() ? 0 : SpreadOf(frame).median);
 }
 
-std::string RowName(const Row& r) { return r.features == 0 || r.mode.rfind("gps-imu-vision", 0) != 0 ? r.mode : r.mode + " " + std::to_string(r.features); }
+std::string RowName(const Row& r) {
+  if (r.features == 0 || r.mode.rfind("gps-imu-vision", 0) != 0) return r.mode;
+  return r.mode + " " + std::to_string(r.features) + (r.knob.empty() ? "" : ", " + r.knob);
+}
 
-void Plot(const std::vector<Row>& rows, const std::string& path, double seconds) {
+void Plot(const std::vector<Row>& all_rows, const std::string& path, double seconds) {
+  // The sweep, the issue-5 front end, unknown features, variants and peers; the knob rows only in the tables.
+  std::vector<Row> rows;
+  for (const Row& r : all_rows) {
+    if (r.knob.empty() || r.key.find("every_frame") != std::string::npos || r.key.find("unknown_50") != std::string::npos ||
+        r.key.find("joint") != std::string::npos || r.event)
+      rows.push_back(r);
+  }
   const int w = 1200, h = 520, pad = 60;
   cv::Mat img(h, w, CV_8UC3, cv::Scalar(255, 255, 255));
-  const cv::Scalar palette[] = {{60, 60, 200}, {40, 150, 40}, {200, 120, 30}, {160, 40, 160}, {30, 160, 200}, {90, 90, 90}, {20, 20, 20}};
+  const cv::Scalar palette[] = {{60, 60, 200},  {40, 150, 40}, {200, 120, 30}, {160, 40, 160}, {30, 160, 200}, {90, 90, 90},
+                                {20, 20, 20},   {0, 90, 255},  {255, 0, 150}, {0, 200, 120}, {120, 60, 0},  {150, 150, 0}};
   auto log_y = [&](double px, int top, int bottom) {
     const double lo = std::log10(0.1), hi = std::log10(300.0);
     const double t = (std::log10(std::clamp(px, 0.1, 300.0)) - lo) / (hi - lo);
@@ -124,7 +214,7 @@ void Plot(const std::vector<Row>& rows, const std::string& path, double seconds)
   }
   for (size_t i = 0; i < rows.size(); ++i) {
     const Row& r = rows[i];
-    const cv::Scalar c = palette[i % 7];
+    const cv::Scalar c = palette[i % 12];
     const Spread s = SpreadOf(r.errors_px);
     const int x = lx0 + static_cast<int>(r.TotalMs() / (max_ms * 1.1) * (lx1 - lx0));
     cv::circle(img, {x, log_y(s.median, pad, h - pad)}, 5, c, cv::FILLED);
@@ -168,12 +258,12 @@ int RunPose(const PoseBenchOptions& o) {
   const int n = static_cast<int>(std::floor(o.seconds * 30 + 1e-9)) + 1;
   std::vector<sim::SimImage> frames;
   std::vector<Rigid3d> truth;
-  const Clock::time_point render_start = Clock::now();
+  const WallClock::time_point render_start = WallClock::now();
   for (int f = 0; f < n; ++f) {
     frames.push_back(sim_camera.Frame(f, f / 30.0));
     truth.push_back(sim_camera.PoseAt(f / 30.0));
   }
-  const double render_ms = MsSince(render_start) / n;
+  const double render_ms = std::chrono::duration<double, std::milli>(WallClock::now() - render_start).count() / n;
   const TriangleMesh mesh = scene::BuildStaticMesh(world, 2.0);
   const pose::FeatureMap map = pose::CampusFeatureMap(world);
   std::vector<std::vector<Eigen::Vector3d>> visible;
@@ -184,73 +274,154 @@ int RunPose(const PoseBenchOptions& o) {
   size_t visible_total = 0;
   for (const auto& v : visible) visible_total += v.size();
 
+  // The runs: the feature sweep with the video-rate front end (default options), then the knobs
+  // of the front end at 50 features, unknown features correcting the pose, and the scenario
+  // variants; the peers run on the default 50-feature run's matches.
+  struct Run {
+    int features = 0;
+    std::string knob, key;
+    std::function<void(pose::VisionOptions&)> tweak;
+    const Event* event = nullptr;
+  };
+  const Event bus{"bus", 3.0, 6.0}, bump{"bump", 5.0, 5.2};
+  std::vector<Run> runs;
+  for (int features : o.features) runs.push_back({features, "", features == 0 ? "gps_imu" : "gps_imu_vision_" + std::to_string(features), nullptr});
+  auto add = [&](const std::string& knob, const std::string& key, std::function<void(pose::VisionOptions&)> tweak, const Event* e = nullptr) {
+    runs.push_back({50, knob, "gps_imu_vision_50_" + key, std::move(tweak), e});
+  };
+  if (o.knobs) {
+    add("full matching every frame (issue-5 front end)", "every_frame", [](pose::VisionOptions& v) { v.keyframe_interval = 1, v.visibility_cache_m = 0; });
+    add("lines followed between keyframes (1D edge search)", "line_tracking", [](pose::VisionOptions& v) { v.track_lines = true; });
+    add("tracked corners re-snapped by cornerSubPix", "resnap", [](pose::VisionOptions& v) { v.refine_tracked_corners = true; });
+    add("tracking from the first frame (no lock wait)", "no_lock_wait", [](pose::VisionOptions& v) { v.lock_frames = 0; });
+    add("tracked features at detection noise", "tracked_sigma_0", [](pose::VisionOptions& v) { v.tracked_sigma_px = 0; });
+    add("keyframe every 5", "keyframe_5", [](pose::VisionOptions& v) { v.keyframe_interval = 5; });
+    add("keyframe every 20", "keyframe_20", [](pose::VisionOptions& v) { v.keyframe_interval = 20; });
+    add("no visibility cache", "no_visibility_cache", [](pose::VisionOptions& v) { v.visibility_cache_m = 0; });
+    add("never declared lost", "never_lost", [](pose::VisionOptions& v) { v.lost_frames = 0; });
+    add("no unknown features", "no_unknown", [](pose::VisionOptions& v) { v.use_new_points = false; });
+  }
+  if (o.new_points) {
+    runs.push_back({50, "unknown points also correcting the pose (no cross-covariances, issue 5)", "gps_imu_vision_unknown_50",
+                    [](pose::VisionOptions& v) { v.new_points_in_pose = true; }});
+    runs.push_back({50, "unknown points in the state, cross-covariances kept", "gps_imu_vision_joint_50",
+                    [](pose::VisionOptions& v) { v.joint_new_points = true; }});
+  }
+  const bool variants = o.variants && o.seconds >= 7.2;
+  if (variants) {
+    add("bus covering half the image 3-6 s", "bus", nullptr, &bus);
+    add("camera bumped 5 deg at 5.0-5.2 s", "bump", nullptr, &bump);
+  }
+  const cv::Mat bus_texture = BusTexture();
+
   std::vector<Row> rows;
-  Row pnp{"peer: cv::solvePnP", 50};
-  int pnp_frames = 0;
-  // The sweep, then 50 features with converged unknown points also correcting the pose.
-  std::vector<std::pair<int, bool>> runs;
-  for (int features : o.features) runs.emplace_back(features, false);
-  if (o.new_points) runs.emplace_back(50, true);
-  for (const auto& [features, unknown_in_pose] : runs) {
-    Row row{features == 0 ? "gps-imu" : unknown_in_pose ? "gps-imu-vision+unknown" : "gps-imu-vision", features};
-    pose::PoseTracker tracker(log);
+  Row pnp{"peer: cv::solvePnP", 50}, ransac{"peer: cv::solvePnPRansac", 50};
+  pnp.key = "peer__cv__solvePnP", ransac.key = "peer__cv__solvePnPRansac";
+  int pnp_frames = 0, ransac_frames = 0;
+  for (const Run& run : runs) {
+    Row row{run.features == 0 ? "gps-imu" : "gps-imu-vision", run.features, run.knob, run.key};
+    row.event = run.event;
+    pose::PoseFilterOptions fo;
+    fo.orientation_correlation_s = o.ahrs_correlation_s;
+    pose::PoseTracker tracker(log, fo);
     pose::VisionOptions vo;
-    vo.max_features = features;
+    vo.max_features = run.features;
     vo.use_lines = o.lines;
     vo.use_new_points = o.new_points;
-    vo.new_points_in_pose = unknown_in_pose;
+    if (run.tweak) run.tweak(vo);
     pose::VisionTracker vision(map, mesh, k, vo);
+    const bool peer = run.features == 50 && run.key == "gps_imu_vision_50";
     for (int f = 0; f < n; ++f) {
+      const double t_s = f / 30.0;
       const int64_t t_ns = static_cast<int64_t>(std::llround(f * 1e9 / 30));
+      Rigid3d frame_truth = truth[f];
+      const sim::SimImage* frame = &frames[f];
+      sim::SimImage changed;
+      if (run.event) {
+        changed = frames[f];
+        if (ApplyEvent(*run.event, bus_texture, k, f, t_s, changed, frame_truth)) frame = &changed;
+      }
+      const std::vector<Eigen::Vector3d> seen = frame_truth.translation == truth[f].translation && frame == &frames[f] ? visible[f] : vision.VisiblePoints(frame_truth);
       const Clock::time_point t0 = Clock::now();
       const pose::PoseSample prior = tracker.Advance(t_ns);
-      row.filter_ms += MsSince(t0);
+      const double filter_ms = MsSince(t0);
+      row.filter_ms += filter_ms;
       if (!prior.valid) continue;
-      if (features > 0) {
-        const pose::VisionFrameStats s = vision.Update(frames[f].bgr.data(), frames[f].width, frames[f].height, tracker.filter());
+      double frame_ms = filter_ms;
+      if (run.features > 0) {
+        const pose::VisionFrameStats s = vision.Update(frame->bgr.data(), frame->width, frame->height, tracker.filter());
         row.detect_ms += s.detect_ms;
         row.update_ms += s.update_ms;
+        frame_ms += s.detect_ms + s.update_ms;
         row.used += s.features_used();
+        for (int st = 0; st < pose::kVisionStageCount; ++st) row.stage_ms[st] += s.stage_ms[st];
+        row.keyframes += s.keyframe;
+        row.weak_locks += s.weak_lock;
+        row.relocks += s.relocks;
+        row.rejected_gate += s.rejected_gate, row.rejected_behind += s.rejected_behind, row.rejected_not_finite += s.rejected_not_finite;
+        row.klt_lost += s.klt_lost, row.unknown_dropped += s.unknown_dropped;
         for (const auto& [p, uv] : s.point_matches) {
-          const auto true_uv = ProjectToPixel(k, truth[f].Inverse() * p, 0.1);
+          const auto true_uv = ProjectToPixel(k, frame_truth.Inverse() * p, 0.1);
           ++row.matches;
           row.matches_within_2px += true_uv && (*true_uv - uv).norm() <= 2.0;
         }
-        if (features == 50 && !unknown_in_pose) {  // the peer: per-frame PnP on the same known-point matches
-          Rigid3d pnp_pose = prior.world_from_camera;
-          const Clock::time_point p0 = Clock::now();
-          if (s.point_matches.size() >= 6) {
-            std::vector<cv::Point3d> object;
-            std::vector<cv::Point2d> image;
-            for (const auto& [p, uv] : s.point_matches) {
-              object.emplace_back(p.x(), p.y(), p.z());
-              image.emplace_back(uv.x(), uv.y());
+        if (peer) {  // the peers: per-frame PnP on the same known-point matches
+          for (int method = 0; method < 2; ++method) {
+            Row& peer_row = method == 0 ? pnp : ransac;
+            Rigid3d pnp_pose = prior.world_from_camera;
+            const Clock::time_point p0 = Clock::now();
+            if (s.point_matches.size() >= 6) {
+              std::vector<cv::Point3d> object;
+              std::vector<cv::Point2d> image;
+              for (const auto& [p, uv] : s.point_matches) {
+                object.emplace_back(p.x(), p.y(), p.z());
+                image.emplace_back(uv.x(), uv.y());
+              }
+              const cv::Matx33d K(k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1);
+              const Rigid3d cam_from_world = prior.world_from_camera.Inverse();
+              cv::Mat rvec, tvec;
+              cv::eigen2cv(Eigen::Vector3d(pose::SO3Log(cam_from_world.rotation)), rvec);
+              cv::eigen2cv(Eigen::Vector3d(cam_from_world.translation), tvec);
+              const bool ok = method == 0 ? cv::solvePnP(object, image, K, cv::noArray(), rvec, tvec, true, cv::SOLVEPNP_ITERATIVE)
+                                          : cv::solvePnPRansac(object, image, K, cv::noArray(), rvec, tvec, true, 100, 3.0f, 0.99, cv::noArray(),
+                                                               cv::SOLVEPNP_ITERATIVE);
+              if (ok) {
+                Eigen::Vector3d r, t;
+                cv::cv2eigen(rvec, r);
+                cv::cv2eigen(tvec, t);
+                pnp_pose = Rigid3d(pose::SO3Exp(r), t).Inverse();
+                ++(method == 0 ? pnp_frames : ransac_frames);
+              }
             }
-            const cv::Matx33d K(k.fx, 0, k.cx, 0, k.fy, k.cy, 0, 0, 1);
-            const Rigid3d cam_from_world = prior.world_from_camera.Inverse();
-            cv::Mat rvec, tvec;
-            cv::eigen2cv(Eigen::Vector3d(pose::SO3Log(cam_from_world.rotation)), rvec);
-            cv::eigen2cv(Eigen::Vector3d(cam_from_world.translation), tvec);
-            if (cv::solvePnP(object, image, K, cv::noArray(), rvec, tvec, true, cv::SOLVEPNP_ITERATIVE)) {
-              Eigen::Vector3d r, t;
-              cv::cv2eigen(rvec, r);
-              cv::cv2eigen(tvec, t);
-              pnp_pose = Rigid3d(pose::SO3Exp(r), t).Inverse();
-              ++pnp_frames;
-            }
+            const double pnp_ms = MsSince(p0);
+            peer_row.update_ms += pnp_ms;
+            peer_row.detect_ms += s.detect_ms;
+            peer_row.frame_ms.push_back(s.detect_ms + pnp_ms);
+            ++peer_row.frames;
+            Misregistration(k, frame_truth, pnp_pose, seen, peer_row.errors_px, &peer_row.frame_median_px);
           }
-          pnp.update_ms += MsSince(p0);
-          pnp.detect_ms += s.detect_ms;
-          ++pnp.frames;
-          Misregistration(k, truth[f], pnp_pose, visible[f], pnp.errors_px, &pnp.frame_median_px);
         }
       }
       ++row.frames;
-      Misregistration(k, truth[f], tracker.Current().world_from_camera, visible[f], row.errors_px, &row.frame_median_px);
+      row.frame_ms.push_back(frame_ms);
+      const pose::PoseSample current = tracker.Current();
+      Misregistration(k, frame_truth, current.world_from_camera, seen, row.errors_px, &row.frame_median_px);
+      const double nees = PoseNees(frame_truth, current);
+      ++row.nees_frames;
+      row.nees_in_band += nees >= kNeesLow && nees <= kNeesHigh;
+      row.nees_sum += std::min(nees, 1e6);
+      if (run.event) {
+        std::vector<double>* window = t_s >= run.event->start_s - run.event->before_s && t_s < run.event->start_s ? &row.before_px
+                                      : t_s >= run.event->start_s && t_s < run.event->end_s                       ? &row.during_px
+                                      : t_s >= run.event->end_s && t_s < run.event->end_s + run.event->after_s     ? &row.after_px
+                                                                                                                  : nullptr;
+        if (window) Misregistration(k, frame_truth, current.world_from_camera, seen, *window, nullptr);
+      }
     }
     rows.push_back(std::move(row));
   }
   if (pnp.frames > 0) rows.push_back(pnp);
+  if (ransac.frames > 0) rows.push_back(ransac);
 
   // AVE §5.1: "one degree of orientation-angle error results in over 10 pixels of alignment error".
   auto one_degree = [&](const PinholeIntrinsics& kk, const Eigen::Vector3d& axis) {
@@ -268,25 +439,74 @@ int RunPose(const PoseBenchOptions& o) {
 
   std::printf("ave-bench pose: %s camera %s, %d frames at 30 Hz (%.1f s), %zu model-point observations, render %.1f ms/frame\n",
               o.scenario.c_str(), o.camera.c_str(), n, o.seconds, visible_total, render_ms);
-  std::printf("| mode | features used/frame | median px | p95 px | max px | point matches <= 2 px | filter ms | detect ms | EKF update ms | total ms/frame |\n");
-  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+  std::printf("| mode | features used/frame | median px | p95 px | max px | point matches <= 2 px | NEES in 95 %% band | keyframes | filter ms | detect ms | EKF + unknown ms | total ms/frame | max frame ms |\n");
+  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
   std::ostringstream json;
   json << "{\"bench\":\"pose\",\"scenario\":\"" << o.scenario << "\",\"camera\":\"" << o.camera << "\",\"frames\":" << n;
+  double default_nees_in_band = -1;
   for (const Row& r : rows) {
     const Spread s = SpreadOf(r.errors_px);
     const double frames = std::max(1, r.frames);
     const std::string within = r.matches > 0 ? std::to_string(100 * r.matches_within_2px / r.matches) + " %" : "-";
-    std::printf("| %s | %.1f | %.2f | %.2f | %.1f | %s | %.3f | %.2f | %.3f | %.2f |\n", RowName(r).c_str(), r.used / frames, s.median, s.p95,
-                s.max, within.c_str(), r.filter_ms / frames, r.detect_ms / frames, r.update_ms / frames, r.TotalMs());
-    std::string key = RowName(r);
-    std::replace_if(key.begin(), key.end(), [](char c) { return !std::isalnum(static_cast<unsigned char>(c)); }, '_');
-    char buf[256];
-    std::snprintf(buf, sizeof(buf), ",\"%s\":{\"median_px\":%.3f,\"p95_px\":%.3f,\"max_px\":%.2f,\"update_ms\":%.4f,\"ms_per_frame\":%.3f}",
-                  key.c_str(), s.median, s.p95, s.max, r.update_ms / frames, r.TotalMs());
-    json << buf;
+    const double in_band = r.nees_frames > 0 ? static_cast<double>(r.nees_in_band) / r.nees_frames : -1;
+    const double max_frame_ms = r.frame_ms.empty() ? 0 : *std::max_element(r.frame_ms.begin(), r.frame_ms.end());
+    char nees[32] = "-", keyframes[32] = "-";
+    if (in_band >= 0) std::snprintf(nees, sizeof(nees), "%.0f %%", 100 * in_band);
+    if (r.features > 0 && r.nees_frames > 0) std::snprintf(keyframes, sizeof(keyframes), "%.0f %%", 100.0 * r.keyframes / frames);
+    std::printf("| %s | %.1f | %.2f | %.2f | %.1f | %s | %s | %s | %.3f | %.2f | %.3f | %.2f | %.1f |\n", RowName(r).c_str(), r.used / frames, s.median,
+                s.p95, s.max, within.c_str(), nees, keyframes, r.filter_ms / frames, r.detect_ms / frames, r.update_ms / frames, r.TotalMs(),
+                max_frame_ms);
+    if (r.key == "gps_imu_vision_50") default_nees_in_band = in_band;
+    char buf[512];
+    int len = std::snprintf(buf, sizeof(buf), ",\"%s\":{\"median_px\":%.3f,\"p95_px\":%.3f,\"max_px\":%.2f,\"update_ms\":%.4f,\"ms_per_frame\":%.3f",
+                            r.key.c_str(), s.median, s.p95, s.max, r.update_ms / frames, r.TotalMs());
+    if (in_band >= 0) len += std::snprintf(buf + len, sizeof(buf) - len, ",\"nees_in_band\":%.3f,\"nees_mean\":%.2f", in_band, r.nees_sum / r.nees_frames);
+    if (r.event) {
+      len += std::snprintf(buf + len, sizeof(buf) - len, ",\"before_median_px\":%.3f,\"during_median_px\":%.3f,\"after_median_px\":%.3f,\"after_p95_px\":%.3f",
+                           SpreadOf(r.before_px).median, SpreadOf(r.during_px).median, SpreadOf(r.after_px).median, SpreadOf(r.after_px).p95);
+    }
+    json << buf << "}";
+  }
+  if (default_nees_in_band >= 0) json << ",\"nees_in_band\":" << default_nees_in_band;
+  std::printf("PnP peers converged on %d (solvePnP) and %d (solvePnPRansac) of %d frames (GPS+inertial pose otherwise)\n", pnp_frames,
+              ransac_frames, pnp.frames);
+
+  // Stage table: thread CPU ms per frame of each front-end stage, per 50-feature configuration.
+  std::vector<const Row*> staged;
+  for (const Row& r : rows)
+    if (r.features == 50 && r.mode == "gps-imu-vision" && !r.event && r.key.find("unknown") == std::string::npos &&
+        r.key.find("joint") == std::string::npos)
+      staged.push_back(&r);
+  if (!staged.empty()) {
+    std::printf("\nvision front end, CPU ms per frame by stage (one core):\n| stage |");
+    for (const Row* r : staged) std::printf(" %s |", r->knob.empty() ? "default (keyframe every 10)" : r->knob.c_str());
+    std::printf("\n| --- |");
+    for (size_t i = 0; i < staged.size(); ++i) std::printf(" ---: |");
+    std::printf("\n");
+    for (int st = 0; st < pose::kVisionStageCount; ++st) {
+      std::printf("| %s |", pose::VisionStageName(st));
+      for (const Row* r : staged) std::printf(" %.2f |", r->stage_ms[st] / std::max(1, r->frames));
+      std::printf("\n");
+    }
+    std::printf("| **total** |");
+    for (const Row* r : staged) std::printf(" **%.2f** |", r->TotalMs());
+    std::printf("\n");
+  }
+  std::printf("\nrejections over the run (features not applied, by reason):\n| mode | outside the gate | behind the camera | not finite | KLT lost | unknown features dropped (gate) | weak-lock keyframes | declared lost |\n");
+  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+  for (const Row& r : rows) {
+    if (r.features == 0 || r.mode != "gps-imu-vision") continue;
+    std::printf("| %s | %lld | %lld | %lld | %lld | %lld | %d | %d |\n", RowName(r).c_str(), static_cast<long long>(r.rejected_gate),
+                static_cast<long long>(r.rejected_behind), static_cast<long long>(r.rejected_not_finite), static_cast<long long>(r.klt_lost),
+                static_cast<long long>(r.unknown_dropped), r.weak_locks, r.relocks);
+  }
+  std::printf("\nscenario variants, misregistration median px (p95) in the windows around the event:\n| variant | 1 s before | during | 1 s after |\n| --- | ---: | ---: | ---: |\n");
+  for (const Row& r : rows) {
+    if (!r.event) continue;
+    const Spread b = SpreadOf(r.before_px), d = SpreadOf(r.during_px), a = SpreadOf(r.after_px);
+    std::printf("| %s | %.2f (%.2f) | %.2f (%.2f) | %.2f (%.2f) |\n", RowName(r).c_str(), b.median, b.p95, d.median, d.p95, a.median, a.p95);
   }
   const double p = one_degree(k, pitch), y = one_degree(k, yaw), r = one_degree(k, roll), p2 = one_degree(k2, pitch), y2 = one_degree(k2, yaw);
-  std::printf("PnP peer converged on %d of %d frames (GPS+inertial pose otherwise)\n", pnp_frames, pnp.frames);
   // The filter alone with exactly 50 features (the campus shows ~27 at a time): 50 point updates
   // on a copy (coarse pass) and 50 on the filter (fine pass), as vision.cc does per frame.
   double ekf50_ms = 0;
@@ -331,6 +551,12 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--lines", o->lines, "use known 3D line features")->capture_default_str();
   sub.add_option("--new-points", o->new_points, "track and triangulate unknown point features (and add the row where they correct the pose)")
       ->capture_default_str();
+  sub.add_option("--ahrs-correlation", o->ahrs_correlation_s, "seconds over which AHRS errors are correlated (0: white, the issue-5 filter)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0, 1e6));
+  sub.add_option("--knobs", o->knobs, "rows for the video-rate front end's knobs (keyframe interval, visibility cache, detection level)")
+      ->capture_default_str();
+  sub.add_option("--variants", o->variants, "rows for the bus and 5-degree-bump scenario variants (need --seconds >= 7.2)")->capture_default_str();
   sub.add_option("--png", o->png, "plot to write (empty: none)")->capture_default_str()->check(ave::cli::WritableFile());
   return [o] { return RunPose(*o); };
 }

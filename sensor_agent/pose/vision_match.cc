@@ -1,0 +1,170 @@
+#include "sensor_agent/pose/vision_match.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include <opencv2/imgproc.hpp>
+
+namespace ave::pose::internal {
+namespace {
+
+double MeanDistance(const cv::Mat& distance, const std::vector<Eigen::Vector2d>& samples, int dx, int dy) {
+  double sum = 0;
+  int n = 0;
+  for (const Eigen::Vector2d& p : samples) {
+    const int x = static_cast<int>(std::lround(p.x())) + dx, y = static_cast<int>(std::lround(p.y())) + dy;
+    if (x < 0 || y < 0 || x >= distance.cols || y >= distance.rows) continue;
+    sum += std::min(distance.at<float>(y, x), static_cast<float>(kChamferCap_px));
+    ++n;
+  }
+  return n * 2 >= static_cast<int>(samples.size()) && n > 0 ? sum / n : kChamferCap_px;
+}
+
+}  // namespace
+
+int Nearest(const std::vector<cv::Point2f>& corners, const Eigen::Vector2d& uv, double radius) {
+  int best = -1;
+  double best_d2 = radius * radius;
+  for (size_t j = 0; j < corners.size(); ++j) {
+    const double dx = corners[j].x - uv.x(), dy = corners[j].y - uv.y();
+    const double d2 = dx * dx + dy * dy;
+    if (d2 <= best_d2) {
+      best_d2 = d2;
+      best = static_cast<int>(j);
+    }
+  }
+  return best;
+}
+
+// Façades repeat horizontal edges (window rows) every few pixels, so the skyline term (model edges
+// with sky above them against the frame's first edge from the top) breaks the tie.
+Eigen::Vector2d ChamferOffset(const cv::Mat& edge_distance, const std::vector<Eigen::Vector2d>& samples, const cv::Mat& skyline_distance,
+                              const std::vector<Eigen::Vector2d>& sky_samples, double radius) {
+  if (samples.size() < 10) return Eigen::Vector2d::Zero();
+  const bool use_sky = sky_samples.size() >= 5;
+  auto score = [&](int dx, int dy) {
+    return MeanDistance(edge_distance, samples, dx, dy) + (use_sky ? MeanDistance(skyline_distance, sky_samples, dx, dy) : 0.0);
+  };
+  const int r = static_cast<int>(radius);
+  int best_x = 0, best_y = 0;
+  double best = score(0, 0);
+  for (int step : {2, 1}) {
+    const int cx = best_x, cy = best_y, reach = step == 2 ? r : 2;
+    for (int dy = cy - reach; dy <= cy + reach; dy += step) {
+      for (int dx = cx - reach; dx <= cx + reach; dx += step) {
+        const double v = score(dx, dy);
+        if (v < best - 1e-9 || (std::abs(v - best) <= 1e-9 && dx * dx + dy * dy < best_x * best_x + best_y * best_y)) {
+          best = v;
+          best_x = dx;
+          best_y = dy;
+        }
+      }
+    }
+  }
+  return Eigen::Vector2d(best_x, best_y);
+}
+
+void EdgeDistances(const cv::Mat& gray, cv::Mat& edge_distance, cv::Mat& skyline_distance) {
+  cv::Mat edges;
+  cv::Canny(gray, edges, 60, 180);
+  cv::distanceTransform(255 - edges, edge_distance, cv::DIST_L2, 3);
+  cv::Mat skyline(edges.size(), CV_8U, cv::Scalar(255));
+  for (int u = 0; u < edges.cols; ++u) {
+    for (int v = 0; v < edges.rows; ++v) {
+      if (edges.at<uint8_t>(v, u)) {
+        skyline.at<uint8_t>(v, u) = 0;
+        break;
+      }
+    }
+  }
+  cv::distanceTransform(skyline, skyline_distance, cv::DIST_L2, 3);
+}
+
+std::vector<std::pair<int, int>> MatchPoints(const std::vector<std::pair<int, Eigen::Vector2d>>& predicted,
+                                             const std::vector<cv::Point2f>& corners, const Eigen::Vector2d& offset, double radius) {
+  std::vector<std::pair<int, int>> out;
+  std::vector<int> owner(corners.size(), -1);
+  for (const auto& [index, uv] : predicted) {
+    const int j = Nearest(corners, uv + offset, radius);
+    if (j < 0) continue;
+    if (owner[j] >= 0) {  // two predictions claim one corner: keep neither
+      out[owner[j]].second = -1;
+      continue;
+    }
+    owner[j] = static_cast<int>(out.size());
+    out.emplace_back(index, j);
+  }
+  std::erase_if(out, [](const auto& m) { return m.second < 0; });
+  return out;
+}
+
+std::vector<cv::Point2f> SearchEdge(const cv::Mat& gray, const std::vector<Eigen::Vector2d>& samples, const Eigen::Vector2d& normal,
+                                    double reach_px, double min_step) {
+  std::vector<cv::Point2f> found;
+  const int reach = static_cast<int>(std::ceil(reach_px));
+  auto at = [&](const Eigen::Vector2d& p) {  // bilinear grey value; NaN outside
+    const double x = p.x(), y = p.y();
+    if (!(x >= 0 && y >= 0 && x < gray.cols - 1 && y < gray.rows - 1)) return std::numeric_limits<double>::quiet_NaN();
+    const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+    const double fx = x - x0, fy = y - y0;
+    const uint8_t* r0 = gray.ptr<uint8_t>(y0);
+    const uint8_t* r1 = gray.ptr<uint8_t>(y0 + 1);
+    return (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x0 + 1]) + fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]);
+  };
+  std::vector<double> profile(2 * reach + 3);
+  for (const Eigen::Vector2d& s : samples) {
+    bool inside = true;
+    for (int i = 0; i < static_cast<int>(profile.size()); ++i) {
+      profile[i] = at(s + normal * (i - reach - 1));
+      inside &= std::isfinite(profile[i]);
+    }
+    if (!inside) continue;
+    int best = -1;
+    double best_step = min_step;
+    std::vector<double> step(2 * reach + 1);
+    for (int i = 0; i <= 2 * reach; ++i) {  // step[i]: central difference at offset i - reach
+      step[i] = 0.5 * std::abs(profile[i + 2] - profile[i]);
+      if (step[i] > best_step) best_step = step[i], best = i;
+    }
+    if (best < 0) continue;
+    double offset = best - reach;
+    if (best > 0 && best < 2 * reach) {
+      const double l = step[best - 1], c = step[best], r = step[best + 1], denom = l - 2 * c + r;
+      if (denom < 0) offset += 0.5 * (l - r) / denom;
+    }
+    const Eigen::Vector2d p = s + normal * offset;
+    found.emplace_back(static_cast<float>(p.x()), static_cast<float>(p.y()));
+  }
+  return found;
+}
+
+CellGrid::CellGrid(int width, int height, int cell_px)
+    : width_(width), height_(height), cell_(std::max(1, cell_px)), cols_((width + cell_ - 1) / cell_), rows_((height + cell_ - 1) / cell_),
+      count_(static_cast<size_t>(cols_) * rows_, 0) {}
+
+void CellGrid::Add(double u, double v) {
+  const int c = static_cast<int>(u) / cell_, r = static_cast<int>(v) / cell_;
+  if (u >= 0 && v >= 0 && c < cols_ && r < rows_) ++count_[r * cols_ + c];
+}
+
+int CellGrid::Count(double u, double v) const {
+  const int c = static_cast<int>(u) / cell_, r = static_cast<int>(v) / cell_;
+  return u >= 0 && v >= 0 && c < cols_ && r < rows_ ? count_[r * cols_ + c] : 0;
+}
+
+cv::Mat CellGrid::ThinMask(int below, int scale) const {
+  scale = std::max(1, scale);
+  cv::Mat mask((height_ + scale - 1) / scale, (width_ + scale - 1) / scale, CV_8U, cv::Scalar(0));
+  for (int r = 0; r < rows_; ++r) {
+    for (int c = 0; c < cols_; ++c) {
+      if (count_[r * cols_ + c] >= below) continue;
+      const cv::Rect cell(c * cell_ / scale, r * cell_ / scale, (cell_ + scale - 1) / scale, (cell_ + scale - 1) / scale);
+      mask(cell & cv::Rect(0, 0, mask.cols, mask.rows)).setTo(255);
+    }
+  }
+  return mask;
+}
+
+}  // namespace ave::pose::internal
