@@ -92,6 +92,7 @@ CellView ViewPoint(const Projector& p, const Eigen::Vector3f& x) {
 struct Carver {
   const std::vector<Projector>& cams;
   const HullOptions& o;
+  int min_views;           // the effective minimum (min_views, min_view_fraction)
   Eigen::Vector3f origin;  // of the level-0 grid
   float voxel;
   Eigen::Vector3i limit;   // level-0 voxels per axis inside the bounds
@@ -110,7 +111,7 @@ struct Carver {
       ++seen;
       if (view == CellView::kBackground && ++background > o.max_background_votes) return false;
     }
-    return seen >= o.min_views;
+    return seen >= min_views;
   }
 
   // Cell of 2^level voxels a side with lower corner `v` (voxels).
@@ -123,10 +124,12 @@ struct Carver {
     ++stats.cells_tested;
     const int side = 1 << level;
     const Eigen::Vector3f lo = origin + voxel * v.cast<float>();
-    int background = 0, unsure = 0, seen_whole = 0;
+    int background = 0, unsure = 0, seen_whole = 0, unseen = 0;
     for (const Projector& p : cams) {
       switch (ViewCell(p, lo, voxel * side)) {
-        case CellView::kUnseen: break;
+        case CellView::kUnseen:
+          if (static_cast<int>(cams.size()) - ++unseen < min_views) return;  // outside the capture volume
+          break;
         case CellView::kBackground: ++background; ++seen_whole; break;
         case CellView::kForeground: ++seen_whole; break;
         case CellView::kMixed: ++unsure; break;
@@ -134,7 +137,7 @@ struct Carver {
       if (background > o.max_background_votes) return;  // every voxel of it is carved
     }
     const bool within = ((v.array() + side) <= limit.array()).all();
-    if (background + unsure <= o.max_background_votes && seen_whole >= o.min_views && within) {
+    if (background + unsure <= o.max_background_votes && seen_whole >= min_views && within) {
       full_cells.push_back(v);  // every voxel of it survives
       full_levels.push_back(level);
       return;
@@ -150,6 +153,7 @@ std::string HullOptions::Check() const {
   if (!std::isfinite(voxel_m) || voxel_m <= 0.001 || voxel_m > 1) return "voxel_m must be in (0.001, 1]";
   if (max_background_votes < 0) return "max_background_votes must be >= 0";
   if (min_views < 1) return "min_views must be >= 1";
+  if (!(min_view_fraction >= 0 && min_view_fraction <= 1)) return "min_view_fraction must be in [0, 1]";
   if (!std::isfinite(floor_z_m)) return "floor_z_m must be finite";
   if (!bounds_m.isEmpty() && !(bounds_m.min().allFinite() && bounds_m.max().allFinite())) return "bounds_m must be finite";
   return {};
@@ -206,7 +210,9 @@ absl::StatusOr<VoxelGrid> CarveVisualHull(const std::vector<StudioCameraModel>& 
     return absl::InvalidArgumentError("visual hull: bounds of " + std::to_string(extent.x()) + " x " + std::to_string(extent.y()) + " x " +
                                       std::to_string(extent.z()) + " m at voxel " + std::to_string(options.voxel_m) + " m");
   }
-  Carver carver{cams, options, bounds.min().cast<float>(), static_cast<float>(options.voxel_m), cells.cast<int>(), {}, {}, {}, {}};
+  const int min_views =
+      std::max(options.min_views, static_cast<int>(std::ceil(options.min_view_fraction * static_cast<double>(cams.size()) - 1e-9)));
+  Carver carver{cams, options, min_views, bounds.min().cast<float>(), static_cast<float>(options.voxel_m), cells.cast<int>(), {}, {}, {}, {}};
   if (options.hierarchical) {
     // Top cells of at most ~0.4 m: a handful of thousand cells over a studio.
     int top = 0;

@@ -5,8 +5,10 @@
 // decided whole, only boundary cells are split, down to `voxel_m`.
 //
 // Vote rule (tolerance for a few bad silhouettes): a voxel survives when at most
-// max_background_votes cameras see its centre as background and at least min_views cameras see
-// it at all. A camera whose image does not contain the voxel (or that it is behind) does not vote.
+// max_background_votes cameras see its centre as background and at least
+// max(min_views, ceil(min_view_fraction * cameras)) cameras see it at all (the capture volume:
+// space that few cameras see, outside the ring, is not the actor's). A camera whose image does
+// not contain the voxel (or that it is behind) does not vote.
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -23,6 +25,7 @@ struct HullOptions {
   double voxel_m = 0.01;          // finest voxel edge, (0.001, 1]
   int max_background_votes = 1;   // >= 0: cameras that may call a voxel background and not carve it
   int min_views = 2;              // >= 1: cameras that must see a voxel for it to survive
+  double min_view_fraction = 0.75;  // [0, 1]: and this share of all cameras
   bool hierarchical = true;       // false: test every voxel of the bounds (the flat peer)
   // Working volume (studio world, metres). Empty: the box of the camera centres in x and y, from
   // floor_z_m up to the highest camera (an error when that box is flat, e.g. collinear cameras).
