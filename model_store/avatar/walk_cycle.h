@@ -16,7 +16,7 @@
 namespace ave::avatar {
 
 struct WalkCycleOptions {
-  double min_cycle_s = 0.6;     // shortest loop (a full walk cycle is two steps, ~1 s)
+  double min_cycle_s = 0.8;     // shortest loop: a full walk cycle (two steps) is ~1 s, one step ~0.5 s
   int max_points = 3000;        // vertices per frame used by the shape difference (evenly thinned)
   int heading_half_window = 2;  // heading from the root's displacement over +-this many frames
   double min_travel_m = 0.01;   // below this displacement a frame keeps the neighbouring heading

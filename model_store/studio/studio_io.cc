@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
@@ -102,6 +103,7 @@ absl::StatusOr<StudioCalibration> ReadStudioCalibration(const std::string& path)
 }
 
 absl::StatusOr<Image> ReadColourPng(const std::string& path) {
+  if (!std::filesystem::is_regular_file(path)) return absl::NotFoundError(path + ": missing");
   const cv::Mat m = cv::imread(path, cv::IMREAD_COLOR);
   if (m.empty()) return absl::NotFoundError(path + ": missing or not a readable image");
   Image img{m.cols, m.rows, std::vector<uint8_t>(static_cast<size_t>(m.cols) * m.rows * 3)};
@@ -110,6 +112,7 @@ absl::StatusOr<Image> ReadColourPng(const std::string& path) {
 }
 
 absl::StatusOr<Mask> ReadMaskPng(const std::string& path) {
+  if (!std::filesystem::is_regular_file(path)) return absl::NotFoundError(path + ": missing");
   const cv::Mat m = cv::imread(path, cv::IMREAD_GRAYSCALE);
   if (m.empty()) return absl::NotFoundError(path + ": missing or not a readable image");
   Mask mask{m.cols, m.rows, std::vector<uint8_t>(static_cast<size_t>(m.cols) * m.rows)};

@@ -133,6 +133,7 @@ int main(int argc, char** argv) {
     if (!cycle.ok()) return Fail(std::string(cycle.status().message()));
   }
   const std::string seq_path = (fs::path(out) / "walk.avseq").string();
+  if (cycle->sequence.frames.size() == 1) std::cerr << "ave-studio: one frame set: the sequence is a statue (stride 0)\n";
   if (absl::Status s = ave::avatar::WriteAvatarSequenceFile(seq_path, cycle->sequence); !s.ok()) return Fail(std::string(s.message()));
   std::fprintf(stderr, "ave-studio: walk cycle frames %d..%d (%zu frames, shape difference %.1f mm), stride %.3f m, %.2f m/s -> %s\n", cycle->first,
                cycle->end - 1, cycle->sequence.frames.size(), 1000 * cycle->shape_difference_m, cycle->sequence.stride_m,
