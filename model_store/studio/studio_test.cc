@@ -218,13 +218,18 @@ TEST(Surface, OwnMarchingCubesIsWatertightOnARandomBlob) {
         s = s * 1664525u + 1013904223u;
         g.occupied[g.Index(x, y, z)] = (s >> 28) < 9;  // ~56 % full, every ambiguous case appears
       }
-  for (int passes : {0, 1}) {
-    SurfaceOptions o;
-    o.smooth_passes = passes;
-    absl::StatusOr<SurfaceMesh> m = ExtractSurface(g, o);
-    ASSERT_TRUE(m.ok());
-    EXPECT_GT(m->TriangleCount(), 100u);
-    ExpectWatertight(*m);
+  for (SurfaceMethod method : {SurfaceMethod::kOwnMarchingCubes, SurfaceMethod::kVtkFlyingEdges, SurfaceMethod::kVtkMarchingCubes}) {
+    if (method != SurfaceMethod::kOwnMarchingCubes && !VtkSurfaceAvailable()) continue;
+    for (int passes : {0, 1}) {
+      SurfaceOptions o;
+      o.method = method;
+      o.smooth_passes = passes;
+      absl::StatusOr<SurfaceMesh> m = ExtractSurface(g, o);
+      ASSERT_TRUE(m.ok()) << m.status();
+      EXPECT_GT(m->TriangleCount(), 100u);
+      SCOPED_TRACE(static_cast<int>(method));
+      ExpectWatertight(*m);
+    }
   }
 }
 
@@ -232,7 +237,9 @@ TEST(Surface, SphereMeshIsClosedOutwardAndMatchesVtk) {
   const auto cams = Ring(12);
   absl::StatusOr<VoxelGrid> h = CarveVisualHull(cams, SphereMasks(cams), SphereHull(0.02));
   ASSERT_TRUE(h.ok());
-  absl::StatusOr<SurfaceMesh> own = ExtractSurface(*h, {});
+  SurfaceOptions own_options;
+  own_options.method = SurfaceMethod::kOwnMarchingCubes;
+  absl::StatusOr<SurfaceMesh> own = ExtractSurface(*h, own_options);
   ASSERT_TRUE(own.ok());
   ExpectWatertight(*own);
   double volume6 = 0, max_radial_error = 0;
@@ -254,6 +261,7 @@ TEST(Surface, SphereMeshIsClosedOutwardAndMatchesVtk) {
   absl::StatusOr<SurfaceMesh> vtk = ExtractSurface(*h, vo);
   ASSERT_TRUE(vtk.ok()) << vtk.status();
   EXPECT_NEAR(static_cast<double>(vtk->TriangleCount()), static_cast<double>(own->TriangleCount()), 0.02 * own->TriangleCount());
+  ExpectWatertight(*vtk);
 }
 
 TEST(Texture, BackIsTexturedFromABackCameraAndColoursComeThrough) {
