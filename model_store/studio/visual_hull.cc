@@ -155,6 +155,7 @@ std::string HullOptions::Check() const {
   if (min_views < 1) return "min_views must be >= 1";
   if (!(min_view_fraction >= 0 && min_view_fraction <= 1)) return "min_view_fraction must be in [0, 1]";
   if (!std::isfinite(floor_z_m)) return "floor_z_m must be finite";
+  if (!(bad_camera_fraction >= 0)) return "bad_camera_fraction must be >= 0";
   if (!bounds_m.isEmpty() && !(bounds_m.min().allFinite() && bounds_m.max().allFinite())) return "bounds_m must be finite";
   return {};
 }
@@ -261,6 +262,42 @@ absl::StatusOr<VoxelGrid> CarveVisualHull(const std::vector<StudioCameraModel>& 
         for (int y = 0; y < side; ++y)
           std::fill_n(grid.occupied.begin() + static_cast<std::ptrdiff_t>(grid.Index(g.x(), g.y() + y, g.z() + z)), side, uint8_t{1});
     }
+  }
+  // Strict pass over the survivors, without the cameras that disagree with most of them.
+  if (options.max_background_votes > 0 && options.bad_camera_fraction <= 1 && grid.Count() > 0) {
+    std::vector<int64_t> seen(cams.size(), 0), background(cams.size(), 0);
+    for (int z = 0; z < grid.size.z(); ++z)
+      for (int y = 0; y < grid.size.y(); ++y)
+        for (int x = 0; x < grid.size.x(); ++x) {
+          if (!grid.occupied[grid.Index(x, y, z)]) continue;
+          const Eigen::Vector3f centre = grid.Center(x, y, z).cast<float>();
+          for (size_t c = 0; c < cams.size(); ++c) {
+            const CellView view = ViewPoint(cams[c], centre);
+            seen[c] += view != CellView::kUnseen;
+            background[c] += view == CellView::kBackground;
+          }
+        }
+    std::vector<const Projector*> good;
+    for (size_t c = 0; c < cams.size(); ++c) {
+      if (seen[c] > 0 && static_cast<double>(background[c]) > options.bad_camera_fraction * static_cast<double>(seen[c])) {
+        carver.stats.bad_cameras.push_back(cameras[c].id);
+      } else {
+        good.push_back(&cams[c]);
+      }
+    }
+    for (int z = 0; z < grid.size.z(); ++z)
+      for (int y = 0; y < grid.size.y(); ++y)
+        for (int x = 0; x < grid.size.x(); ++x) {
+          uint8_t& v = grid.occupied[grid.Index(x, y, z)];
+          if (!v) continue;
+          const Eigen::Vector3f centre = grid.Center(x, y, z).cast<float>();
+          for (const Projector* p : good) {
+            if (ViewPoint(*p, centre) == CellView::kBackground) {
+              v = 0;
+              break;
+            }
+          }
+        }
   }
   if (stats) *stats = carver.stats;
   return grid;

@@ -27,6 +27,11 @@ struct HullOptions {
   int min_views = 2;              // >= 1: cameras that must see a voxel for it to survive
   double min_view_fraction = 0.75;  // [0, 1]: and this share of all cameras
   bool hierarchical = true;       // false: test every voxel of the bounds (the flat peer)
+  // After the tolerant carve, a camera calling more than this share of the surviving voxels
+  // background is taken for a bad silhouette and ignored, and the other cameras carve the
+  // survivors strictly (no tolerance): the tolerance then costs no accuracy when every camera is
+  // good. > 1 turns it off (the tolerant hull is kept as it is).
+  double bad_camera_fraction = 0.2;
   // Working volume (studio world, metres). Empty: the box of the camera centres in x and y, from
   // floor_z_m up to the highest camera (an error when that box is flat, e.g. collinear cameras).
   Eigen::AlignedBox3d bounds_m;
@@ -50,6 +55,7 @@ struct VoxelGrid {
 struct HullStats {
   int64_t cells_tested = 0;   // octree cells projected (all levels above the finest)
   int64_t voxels_tested = 0;  // finest voxels whose centre was projected
+  std::vector<std::string> bad_cameras;  // ignored by the strict pass (bad_camera_fraction)
 };
 
 // The working volume the cameras enclose (HullOptions::bounds_m when empty); an error names the

@@ -55,9 +55,9 @@ TEST_F(StudioTruth, ShadowRemovalKeepsTheShadowOutOfTheSilhouettes) {
 
 TEST_F(StudioTruth, HullMatchesTheTrueActor) {
   // The visual hull of a walking body is larger than the body (the gaps between legs and between
-  // arms and torso are hidden in most views): IoU ~0.73 with the default tolerance of one camera,
-  // ~0.83 without (ave-bench studio).
-  EXPECT_GT(good_iou_, 0.68);
+  // arms and torso are hidden in most views): IoU ~0.83 (ave-bench studio), the same as strict
+  // carving since no camera is bad here.
+  EXPECT_GT(good_iou_, 0.78);
   ReconstructOptions strict = Options20mm();
   strict.hull.max_background_votes = 0;
   absl::StatusOr<FrameSetResult> r = ReconstructFrameSet(set_->cameras, set_->images, set_->backgrounds, strict);
