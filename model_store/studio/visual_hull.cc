@@ -263,12 +263,13 @@ absl::StatusOr<VoxelGrid> CarveVisualHull(const std::vector<StudioCameraModel>& 
           std::fill_n(grid.occupied.begin() + static_cast<std::ptrdiff_t>(grid.Index(g.x(), g.y() + y, g.z() + z)), side, uint8_t{1});
     }
   }
-  // Strict pass over the survivors, without the cameras that disagree with most of them.
+  // Strict pass, without the cameras that disagree with most of the survivors (a sample of
+  // every 8th survivor decides), carving the survivors' box again hierarchically with no tolerance.
   if (options.max_background_votes > 0 && options.bad_camera_fraction <= 1 && grid.Count() > 0) {
     std::vector<int64_t> seen(cams.size(), 0), background(cams.size(), 0);
-    for (int z = 0; z < grid.size.z(); ++z)
-      for (int y = 0; y < grid.size.y(); ++y)
-        for (int x = 0; x < grid.size.x(); ++x) {
+    for (int z = 0; z < grid.size.z(); z += 2)
+      for (int y = 0; y < grid.size.y(); y += 2)
+        for (int x = 0; x < grid.size.x(); x += 2) {
           if (!grid.occupied[grid.Index(x, y, z)]) continue;
           const Eigen::Vector3f centre = grid.Center(x, y, z).cast<float>();
           for (size_t c = 0; c < cams.size(); ++c) {
@@ -277,27 +278,44 @@ absl::StatusOr<VoxelGrid> CarveVisualHull(const std::vector<StudioCameraModel>& 
             background[c] += view == CellView::kBackground;
           }
         }
-    std::vector<const Projector*> good;
+    // At most max_background_votes cameras are dropped (the tolerance's budget), worst first.
+    std::vector<std::pair<double, size_t>> share;
     for (size_t c = 0; c < cams.size(); ++c) {
-      if (seen[c] > 0 && static_cast<double>(background[c]) > options.bad_camera_fraction * static_cast<double>(seen[c])) {
+      const double f = seen[c] > 0 ? static_cast<double>(background[c]) / static_cast<double>(seen[c]) : 0.0;
+      if (f > options.bad_camera_fraction) share.emplace_back(-f, c);
+    }
+    std::sort(share.begin(), share.end());
+    std::vector<bool> bad(cams.size(), false);
+    for (size_t i = 0; i < share.size() && static_cast<int>(i) < options.max_background_votes; ++i) bad[share[i].second] = true;
+    std::vector<StudioCameraModel> good_cameras;
+    std::vector<Mask> good_masks;
+    for (size_t c = 0; c < cams.size(); ++c) {
+      if (bad[c]) {
         carver.stats.bad_cameras.push_back(cameras[c].id);
       } else {
-        good.push_back(&cams[c]);
+        good_cameras.push_back(cameras[c]);
+        good_masks.push_back(silhouettes[c]);
       }
     }
-    for (int z = 0; z < grid.size.z(); ++z)
-      for (int y = 0; y < grid.size.y(); ++y)
-        for (int x = 0; x < grid.size.x(); ++x) {
-          uint8_t& v = grid.occupied[grid.Index(x, y, z)];
-          if (!v) continue;
-          const Eigen::Vector3f centre = grid.Center(x, y, z).cast<float>();
-          for (const Projector* p : good) {
-            if (ViewPoint(*p, centre) == CellView::kBackground) {
-              v = 0;
-              break;
-            }
-          }
+    HullOptions strict = options;  // the tolerant pass settled who sees enough; AND with it below
+    strict.max_background_votes = 0;
+    strict.min_views = 1;
+    strict.min_view_fraction = 0;
+    strict.bounds_m = Eigen::AlignedBox3d(grid.origin_m, grid.origin_m + options.voxel_m * grid.size.cast<double>());
+    HullStats strict_stats;
+    absl::StatusOr<VoxelGrid> refined = CarveVisualHull(good_cameras, good_masks, strict, &strict_stats);
+    if (!refined.ok()) return refined.status();
+    carver.stats.cells_tested += strict_stats.cells_tested;
+    carver.stats.voxels_tested += strict_stats.voxels_tested;
+    const Eigen::Vector3i offset = ((refined->origin_m - grid.origin_m) / options.voxel_m).array().round().cast<int>();
+    for (int z = 0; z < refined->size.z(); ++z)
+      for (int y = 0; y < refined->size.y(); ++y)
+        for (int x = 0; x < refined->size.x(); ++x) {
+          uint8_t& v = refined->occupied[refined->Index(x, y, z)];
+          const Eigen::Vector3i g = Eigen::Vector3i(x, y, z) + offset;
+          if (v && ((g.array() < 0).any() || (g.array() >= grid.size.array()).any() || !grid.occupied[grid.Index(g.x(), g.y(), g.z())])) v = 0;
         }
+    grid = *std::move(refined);
   }
   if (stats) *stats = carver.stats;
   return grid;

@@ -28,7 +28,8 @@ struct HullOptions {
   double min_view_fraction = 0.75;  // [0, 1]: and this share of all cameras
   bool hierarchical = true;       // false: test every voxel of the bounds (the flat peer)
   // After the tolerant carve, a camera calling more than this share of the surviving voxels
-  // background is taken for a bad silhouette and ignored, and the other cameras carve the
+  // background is taken for a bad silhouette and ignored (at most max_background_votes of them,
+  // the worst first), and the other cameras carve the
   // survivors strictly (no tolerance): the tolerance then costs no accuracy when every camera is
   // good. > 1 turns it off (the tolerant hull is kept as it is).
   double bad_camera_fraction = 0.2;
