@@ -9,6 +9,11 @@ bin=$2
 work=$(mktemp -d /tmp/ave_studio_cli.XXXXXX)
 trap 'rm -rf "$work"' EXIT
 fail=0
+"$bin/ave-studio" --help >/dev/null 2>&1 || { echo "FAIL ave-studio --help"; fail=1; }
+"$bin/ave-studio" --input x --out y --no-such-flag 2>"$work/flag"; rc=$?
+if [ $rc -eq 0 ] || [ "$(wc -l <"$work/flag")" -ne 1 ] || ! grep -q no-such-flag "$work/flag"; then echo "FAIL bad flag: rc=$rc $(cat "$work/flag")"; fail=1; fi
+"$bin/ave-studio" --input "$work/nowhere" --out "$work/o" 2>"$work/nocal"; rc=$?
+if [ $rc -eq 0 ] || ! grep -q "nowhere/calibration.json" "$work/nocal"; then echo "FAIL missing calibration: rc=$rc $(cat "$work/nocal")"; fail=1; fi
 sed -e 's/duration_s: 2, width: 640, height: 480/duration_s: 1.3, width: 320, height: 240/' \
   "$src/model_store/scene/scenarios/studio.yaml" >"$work/short.yaml"
 grep -q "duration_s: 1.3" "$work/short.yaml" || { echo "FAIL the studio scenario changed: cannot shorten it"; exit 1; }
