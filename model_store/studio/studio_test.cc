@@ -1,6 +1,11 @@
 // Steps of the studio on made-up scenes with exact answers (a sphere seen by a ring of ideal
 // cameras); the simulated studio scored against its truth is tests/truth/studio_truth_test.cc.
+#include <unistd.h>
+
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <map>
 #include <utility>
 
@@ -9,6 +14,7 @@
 #include "model_store/studio/raster.h"
 #include "model_store/studio/reconstruct.h"
 #include "model_store/studio/segmentation.h"
+#include "model_store/studio/studio_io.h"
 #include "model_store/studio/surface.h"
 #include "model_store/studio/texture.h"
 #include "model_store/studio/visual_hull.h"
@@ -326,6 +332,40 @@ TEST(Texture, BackIsTexturedFromABackCameraAndColoursComeThrough) {
   }
   ASSERT_GT(n, 1000);
   EXPECT_LT(err / n, 20.0);
+}
+
+TEST(StudioIo, CalibrationErrorsNameFileCameraAndField) {
+  const std::string path = (std::filesystem::temp_directory_path() / ("ave_studio_cal_" + std::to_string(::getpid()) + ".json")).string();
+  const std::string cam0 = R"({"id": "ring00", "width": 64, "height": 48, "fx": 50, "fy": 50, "cx": 31.5, "cy": 23.5,
+      "distortion": [0, 0, 0, 0, 0], "world_from_camera": {"qw": 1, "qx": 0, "qy": 0, "qz": 0, "tx": 0, "ty": 0, "tz": 0}})";
+  auto write = [&](const std::string& cameras) {
+    std::ofstream(path) << R"({"format": "ave-studio-calibration-1", "fps": 10, "frames": 2, "floor_z_m": 0, "cameras": [)" << cameras << "]}";
+  };
+  write(cam0);
+  absl::StatusOr<StudioCalibration> cal = ReadStudioCalibration(path);
+  ASSERT_TRUE(cal.ok()) << cal.status();
+  ASSERT_EQ(cal->cameras.size(), 1u);
+  EXPECT_EQ(cal->cameras[0].id, "ring00");
+  EXPECT_EQ(cal->frames, 2);
+  std::string no_fx = cam0;
+  no_fx.replace(no_fx.find("\"fx\": 50, "), 10, "");
+  no_fx.replace(no_fx.find("ring00"), 6, "ring01");
+  write(cam0 + ", " + no_fx);
+  cal = ReadStudioCalibration(path);
+  ASSERT_FALSE(cal.ok());
+  for (const char* part : {"cameras[1]", "ring01", "'fx'"}) EXPECT_NE(cal.status().message().find(part), std::string::npos) << cal.status();
+  EXPECT_NE(cal.status().message().find(path), std::string::npos);
+  std::string distorted = cam0;
+  distorted.replace(distorted.find("[0, 0, 0, 0, 0]"), 15, "[0.1, 0, 0, 0, 0]");
+  write(distorted);
+  cal = ReadStudioCalibration(path);
+  ASSERT_FALSE(cal.ok());
+  EXPECT_NE(cal.status().message().find("distortion"), std::string::npos) << cal.status();
+  write(cam0 + ", " + cam0);
+  cal = ReadStudioCalibration(path);
+  ASSERT_FALSE(cal.ok());
+  EXPECT_NE(cal.status().message().find("used twice"), std::string::npos) << cal.status();
+  std::filesystem::remove(path);
 }
 
 }  // namespace
