@@ -35,6 +35,7 @@ struct StudioBenchOptions {
   std::vector<int> voxel_mm = {40, 20, 10, 5};
   std::string png = "studio_bench.png";
   std::string render_png = "studio_render.png";
+  std::string slice_png = "studio_hull_slices.png";
 };
 
 double CpuMs(ThreadCpuClock::time_point t0) { return std::chrono::duration<double, std::milli>(ThreadCpuClock::now() - t0).count(); }
@@ -139,6 +140,90 @@ void Plot(const std::vector<Row>& rows, const std::string& path) {
   cv::imwrite(path, img);
 }
 
+// Union of hulls carved on one lattice (the same bounds and voxel: origins differ by whole voxels).
+studio::VoxelGrid UnionOf(const std::vector<studio::VoxelGrid>& grids) {
+  studio::VoxelGrid out;
+  if (grids.empty()) return out;
+  const double h = grids[0].voxel_m;
+  Eigen::Vector3d lo = grids[0].origin_m, hi = lo;
+  for (const studio::VoxelGrid& g : grids) {
+    lo = lo.cwiseMin(g.origin_m);
+    hi = hi.cwiseMax(g.origin_m + h * g.size.cast<double>());
+  }
+  out.voxel_m = h;
+  out.origin_m = lo;
+  out.size = ((hi - lo) / h).array().round().cast<int>();
+  out.occupied.assign(static_cast<size_t>(out.size.prod()), 0);
+  for (const studio::VoxelGrid& g : grids) {
+    const Eigen::Vector3i shift = ((g.origin_m - lo) / h).array().round().cast<int>();
+    for (int z = 0; z < g.size.z(); ++z)
+      for (int y = 0; y < g.size.y(); ++y)
+        for (int x = 0; x < g.size.x(); ++x)
+          if (g.occupied[g.Index(x, y, z)]) out.occupied[out.Index(x + shift.x(), y + shift.y(), z + shift.z())] = 1;
+  }
+  return out;
+}
+
+// The hull of each closed part of the actor (its boxes) carved alone from that part's own true
+// silhouettes, strictly, and their union: what the visual hull gives when no limb hides another,
+// so what is left is each box's own wedges between the views.
+studio::VoxelGrid HullOfEachPart(const studio::testing::SimulatedFrameSet& set, double voxel_m) {
+  std::vector<studio::VoxelGrid> hulls;
+  for (const TriangleMesh& part : studio::testing::MeshParts(set.truth_mesh)) {
+    std::vector<studio::Mask> masks;
+    for (const studio::StudioCameraModel& cam : set.cameras) masks.push_back(studio::testing::RenderSilhouette(cam, part));
+    studio::HullOptions o;
+    o.voxel_m = voxel_m;
+    o.max_background_votes = 0;
+    absl::StatusOr<studio::VoxelGrid> g = studio::CarveVisualHull(set.cameras, masks, o);
+    if (g.ok()) hulls.push_back(*std::move(g));
+  }
+  return UnionOf(hulls);
+}
+
+// Horizontal slices of hulls against the truth, top-down, around the actor: grey both, red hull
+// only (excess), blue truth only (missed). One row per hull, one column per height.
+void SlicePng(const std::vector<std::pair<std::string, const studio::VoxelGrid*>>& hulls, const TriangleMesh& truth, const Eigen::Vector2d& centre,
+              const std::string& path) {
+  const std::vector<double> heights = {0.3, 0.7, 1.1, 1.35, 1.65};
+  const double half_m = 0.55;
+  const int px = 3;  // pixels per voxel
+  const int label_w = 250, top = 30;
+  const studio::VoxelGrid& first = *hulls[0].second;
+  const int cells = static_cast<int>(std::lround(2 * half_m / first.voxel_m));
+  const int tile = cells * px;
+  cv::Mat img(top + static_cast<int>(hulls.size()) * (tile + 10), label_w + static_cast<int>(heights.size()) * (tile + 10), CV_8UC3,
+              cv::Scalar(255, 255, 255));
+  for (size_t r = 0; r < hulls.size(); ++r) {
+    const studio::VoxelGrid& hull = *hulls[r].second;
+    const studio::VoxelGrid t = studio::testing::TruthOccupancy(hull, truth);
+    const Eigen::Vector3i shift = ((hull.origin_m - t.origin_m) / hull.voxel_m).array().round().cast<int>();
+    const int y0 = top + static_cast<int>(r) * (tile + 10);
+    cv::putText(img, hulls[r].first, {5, y0 + tile / 2}, cv::FONT_HERSHEY_SIMPLEX, 0.42, cv::Scalar(0, 0, 0));
+    for (size_t c = 0; c < heights.size(); ++c) {
+      const int x0 = label_w + static_cast<int>(c) * (tile + 10);
+      if (r == 0) cv::putText(img, cv::format("z = %.2f m", heights[c]), {x0 + 5, 20}, cv::FONT_HERSHEY_SIMPLEX, 0.45, cv::Scalar(0, 0, 0));
+      const int tz = static_cast<int>(std::floor((heights[c] - t.origin_m.z()) / t.voxel_m));
+      for (int j = 0; j < cells; ++j)
+        for (int i = 0; i < cells; ++i) {
+          const Eigen::Vector2d p = centre + Eigen::Vector2d(-half_m + (i + 0.5) * hull.voxel_m, half_m - (j + 0.5) * hull.voxel_m);
+          const Eigen::Vector3i tv(static_cast<int>(std::floor((p.x() - t.origin_m.x()) / t.voxel_m)),
+                                   static_cast<int>(std::floor((p.y() - t.origin_m.y()) / t.voxel_m)), tz);
+          const bool in_t = (tv.array() >= 0).all() && (tv.array() < t.size.array()).all() && t.occupied[t.Index(tv.x(), tv.y(), tv.z())];
+          const Eigen::Vector3i hv = tv - shift;
+          const bool in_h = (hv.array() >= 0).all() && (hv.array() < hull.size.array()).all() && hull.occupied[hull.Index(hv.x(), hv.y(), hv.z())];
+          const cv::Scalar colour = in_t && in_h ? cv::Scalar(150, 150, 150) : in_h ? cv::Scalar(40, 40, 230) : in_t ? cv::Scalar(220, 120, 0)
+                                                                                                             : cv::Scalar(250, 250, 250);
+          cv::rectangle(img, {x0 + i * px, y0 + j * px}, {x0 + i * px + px - 1, y0 + j * px + px - 1}, colour, cv::FILLED);
+        }
+      cv::rectangle(img, {x0, y0}, {x0 + tile - 1, y0 + tile - 1}, cv::Scalar(0, 0, 0));
+    }
+  }
+  cv::putText(img, "grey: hull and truth, red: hull only (excess), blue: truth only; 1.1 x 1.1 m top-down, x right, y up", {label_w, img.rows - 3},
+              cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(0, 0, 0));
+  cv::imwrite(path, img);
+}
+
 int RunStudio(const StudioBenchOptions& o) {
   UseOneCore();
   std::vector<Row> rows;
@@ -238,6 +323,58 @@ int RunStudio(const StudioBenchOptions& o) {
       }
       it->Add(row);
     }
+    // Where the ceiling's excess comes from: the union of each box's own hull (no limb hides
+    // another), and convex actors alone in the studio (a cylinder: tight; a box: wedges).
+    {
+      const auto t0 = ThreadCpuClock::now();
+      const studio::VoxelGrid parts = HullOfEachPart(*set, 0.01);
+      Row row;
+      row.name = "union of each box's own hull (true box silhouettes, K=0)";
+      row.voxel_mm = 10;
+      row.volume_iou = studio::testing::HullVolumeIoU(parts, set->truth_mesh);
+      row.hull_ms = row.ms = CpuMs(t0);
+      auto it = std::find_if(rows.begin(), rows.end(), [&](const Row& x) { return x.name == row.name; });
+      if (it == rows.end()) {
+        rows.push_back(Row{row.name, 10});
+        it = rows.end() - 1;
+      }
+      it->Add(row);
+      if (frame == o.frames.front()) {
+        ReconstructOptions ro;
+        ro.hull.voxel_m = 0.01;
+        ro.hull.max_background_votes = 0;
+        absl::StatusOr<FrameSetResult> ceiling = studio::ReconstructFromSilhouettes(set->cameras, set->images, set->truth_silhouettes, ro);
+        absl::StatusOr<FrameSetResult> ours = studio::ReconstructFrameSet(set->cameras, set->images, set->backgrounds, defaults);
+        if (!ceiling.ok() || !ours.ok()) return std::cerr << "ave-bench studio: slices\n", 1;
+        Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+        for (const Eigen::Vector3f& p : set->truth_mesh.positions) centre += p.head<2>().cast<double>() / set->truth_mesh.positions.size();
+        SlicePng({{"ave-studio, 10 mm (default)", &ours->hull},
+                  {"hull of the true silhouettes", &ceiling->hull},
+                  {"union of each box's own hull", &parts}},
+                 set->truth_mesh, centre, o.slice_png);
+      }
+      for (const auto& [name, mesh] : {std::pair<std::string, TriangleMesh>{"convex: cylinder r 0.17 m alone (true silhouettes, K=0)",
+                                                                            studio::testing::UprightPrism({-0.3, 0.45}, 0.17, 1.75, 48, 0)},
+                                       std::pair<std::string, TriangleMesh>{"convex: box 0.34 x 0.34 x 1.7 m alone (true silhouettes, K=0)",
+                                                                            studio::testing::UprightPrism({0.6, 0.1}, 0.24, 1.7, 4, 0.4)}}) {
+        if (frame != o.frames.front()) break;
+        std::vector<studio::Mask> masks;
+        for (const studio::StudioCameraModel& cam : set->cameras) masks.push_back(studio::testing::RenderSilhouette(cam, mesh));
+        studio::HullOptions ho;
+        ho.voxel_m = 0.01;
+        ho.max_background_votes = 0;
+        const auto t1 = ThreadCpuClock::now();
+        absl::StatusOr<studio::VoxelGrid> g = studio::CarveVisualHull(set->cameras, masks, ho);
+        if (!g.ok()) return std::cerr << g.status().message() << "\n", 1;
+        Row c;
+        c.name = name;
+        c.voxel_mm = 10;
+        c.hull_ms = c.ms = CpuMs(t1);
+        c.volume_iou = studio::testing::HullVolumeIoU(*g, mesh);
+        rows.push_back(c);
+        rows.back().n = 1;
+      }
+    }
     // Peers at 20 and 10 mm: strict carving, no shadow removal, flat vs hierarchical on one working box.
     for (int mm : {20, 10}) {
       ReconstructOptions strict;
@@ -279,7 +416,7 @@ int RunStudio(const StudioBenchOptions& o) {
   if (fe10 && own10) std::printf("\nsurface at 10 mm: own marching cubes %.1f ms vs VTK flying edges %.1f ms (x%.2f)\n", own10->ms, fe10->ms, fe10->ms / own10->ms);
   if (flat10 && box10) std::printf("hull at 10 mm on one box: hierarchical %.1f ms vs flat %.1f ms (x%.1f)\n", box10->hull_ms, flat10->hull_ms, flat10->hull_ms / box10->hull_ms);
   Plot(rows, o.png);
-  std::printf("wrote %s and %s\n", o.png.c_str(), o.render_png.c_str());
+  std::printf("wrote %s, %s and %s\n", o.png.c_str(), o.render_png.c_str(), o.slice_png.c_str());
   if (!main10) return 0;
   std::printf("{\"bench\": \"studio\", \"voxel_mm\": 10, \"volume_iou\": %.4f, \"chamfer_mm\": %.2f, \"ms_per_frameset\": %.1f, "
               "\"texture_err_levels\": %.1f, \"silhouette_iou\": %.4f, \"silhouette_iou_no_shadow_removal\": %.4f, \"triangles\": %.0f, "
@@ -299,6 +436,7 @@ Runner AddStudioBench(CLI::App& sub) {
       ->check(ave::cli::Range(0, 1000));
   sub.add_option("--voxel-mm", options->voxel_mm, "voxel sizes in mm, comma-separated")->delimiter(',')->capture_default_str()->check(ave::cli::Range(2, 200));
   sub.add_option("--png", options->png, "plot to write")->capture_default_str();
+  sub.add_option("--slice-png", options->slice_png, "horizontal slices of the hulls against the true actor (first frame, 10 mm)")->capture_default_str();
   sub.add_option("--render-png", options->render_png, "a camera image beside the textured reconstruction rendered from it")->capture_default_str();
   return [options] { return RunStudio(*options); };
 }

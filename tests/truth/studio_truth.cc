@@ -14,6 +14,8 @@ namespace {
 using Eigen::Vector2d;
 using Eigen::Vector3d;
 
+constexpr double kPi = 3.14159265358979323846;
+
 // Closest point on triangle abc to p (Ericson, Real-Time Collision Detection 5.1.5).
 Vector3d ClosestOnTriangle(const Vector3d& p, const Vector3d& a, const Vector3d& b, const Vector3d& c) {
   const Vector3d ab = b - a, ac = c - a, ap = p - a;
@@ -46,6 +48,24 @@ std::vector<Tri> Triangles(const std::vector<Eigen::Vector3f>& positions, const 
                    origin + positions[indices[t + 2]].cast<double>()});
   }
   return out;
+}
+
+// The closed part each triangle belongs to: triangles sharing a vertex index are one part.
+std::vector<int> TrianglePart(const std::vector<uint32_t>& indices, size_t vertices) {
+  std::vector<uint32_t> parent(vertices);
+  for (size_t i = 0; i < vertices; ++i) parent[i] = static_cast<uint32_t>(i);
+  auto find = [&](uint32_t v) {
+    while (parent[v] != v) v = parent[v] = parent[parent[v]];
+    return v;
+  };
+  for (size_t t = 0; t + 2 < indices.size(); t += 3) {
+    parent[find(indices[t + 1])] = find(indices[t]);
+    parent[find(indices[t + 2])] = find(indices[t]);
+  }
+  std::unordered_map<uint32_t, int> id;
+  std::vector<int> part;
+  for (size_t t = 0; t + 2 < indices.size(); t += 3) part.push_back(id.emplace(find(indices[t]), static_cast<int>(id.size())).first->second);
+  return part;
 }
 
 // Winding number of p along +z: signed crossings of the upward ray (+1 leaving through an
@@ -148,22 +168,38 @@ absl::StatusOr<SimulatedFrameSet> SimulateStudioFrameSet(int frame, int cameras)
   return set;
 }
 
-double HullVolumeIoU(const VoxelGrid& hull, const TriangleMesh& truth) {
+VoxelGrid TruthOccupancy(const VoxelGrid& lattice, const TriangleMesh& truth) {
+  VoxelGrid out;
+  out.voxel_m = lattice.voxel_m;
   const std::vector<Tri> tris = Triangles(truth.positions, truth.indices, truth.origin);
-  if (tris.empty()) return 0;
-  // The lattice over both the hull grid and the truth's box.
+  if (tris.empty()) {
+    out.origin_m = lattice.origin_m;
+    out.size = lattice.size;
+    out.occupied.assign(lattice.occupied.size(), 0);
+    return out;
+  }
+  // The lattice over both the given grid and the truth's box.
   Eigen::AlignedBox3d box;
   for (const Tri& t : tris) box.extend(t.a), box.extend(t.b), box.extend(t.c);
-  const double h = hull.voxel_m;
-  const Eigen::Vector3i lo = ((box.min() - hull.origin_m) / h).array().floor().cast<int>().min(0);
-  const Eigen::Vector3i hi = ((box.max() - hull.origin_m) / h).array().ceil().cast<int>().max(hull.size.array());
-  int64_t inter = 0, uni = 0;
-  std::vector<std::pair<double, int>> crossings;
-  for (int y = lo.y(); y < hi.y(); ++y) {
-    for (int x = lo.x(); x < hi.x(); ++x) {
-      const Vector3d column = hull.origin_m + h * Vector3d(x + 0.5, y + 0.5, 0);
+  const double h = lattice.voxel_m;
+  const Eigen::Vector3i lo = ((box.min() - lattice.origin_m) / h).array().floor().cast<int>().min(0);
+  const Eigen::Vector3i hi = ((box.max() - lattice.origin_m) / h).array().ceil().cast<int>().max(lattice.size.array());
+  out.origin_m = lattice.origin_m + h * lo.cast<double>();
+  out.size = hi - lo;
+  out.occupied.assign(static_cast<size_t>(out.size.x()) * out.size.y() * out.size.z(), 0);
+  // Inside = inside at least one closed part, each part by the parity of its own crossings of
+  // the vertical line: overlapping parts count once and a part wound inward counts as well
+  // (a summed winding number would cancel it against an outward part it overlaps).
+  const std::vector<int> part = TrianglePart(truth.indices, truth.positions.size());
+  const int parts = part.empty() ? 0 : *std::max_element(part.begin(), part.end()) + 1;
+  std::vector<std::pair<double, int>> crossings;  // height, part
+  std::vector<uint8_t> odd(parts);
+  for (int y = 0; y < out.size.y(); ++y) {
+    for (int x = 0; x < out.size.x(); ++x) {
+      const Vector3d column = out.Center(x, y, 0);
       crossings.clear();
-      for (const Tri& t : tris) {  // where the vertical line through the column crosses the truth
+      for (size_t i = 0; i < tris.size(); ++i) {  // where the vertical line through the column crosses the truth
+        const Tri& t = tris[i];
         const Vector2d a = t.a.head<2>(), b = t.b.head<2>(), c = t.c.head<2>(), q = column.head<2>();
         const double area = (b - a).x() * (c - a).y() - (b - a).y() * (c - a).x();
         if (std::abs(area) < 1e-15) continue;
@@ -171,24 +207,107 @@ double HullVolumeIoU(const VoxelGrid& hull, const TriangleMesh& truth) {
         const double l1 = ((c - q).x() * (a - q).y() - (c - q).y() * (a - q).x()) / area;
         const double l2 = 1 - l0 - l1;
         if (l0 < 0 || l1 < 0 || l2 < 0) continue;
-        crossings.emplace_back(l0 * t.a.z() + l1 * t.b.z() + l2 * t.c.z(), area > 0 ? 1 : -1);
+        crossings.emplace_back(l0 * t.a.z() + l1 * t.b.z() + l2 * t.c.z(), part[i]);
       }
       std::sort(crossings.begin(), crossings.end());
-      int above = 0;  // winding of a point below every crossing
-      for (const auto& cr : crossings) above += cr.second;
+      std::fill(odd.begin(), odd.end(), 0);  // below every crossing: outside every part
+      int inside = 0;                        // parts the point is in
       size_t next = 0;
-      for (int z = lo.z(); z < hi.z(); ++z) {
-        const double zc = hull.origin_m.z() + h * (z + 0.5);
-        while (next < crossings.size() && crossings[next].first <= zc) above -= crossings[next++].second;
-        const bool in_truth = above != 0;
-        const bool in_hull = x >= 0 && y >= 0 && z >= 0 && x < hull.size.x() && y < hull.size.y() && z < hull.size.z() &&
-                             hull.occupied[hull.Index(x, y, z)];
-        inter += in_truth && in_hull;
-        uni += in_truth || in_hull;
+      for (int z = 0; z < out.size.z(); ++z) {
+        const double zc = out.Center(x, y, z).z();
+        for (; next < crossings.size() && crossings[next].first <= zc; ++next) {
+          uint8_t& o = odd[crossings[next].second];
+          o ^= 1;
+          inside += o ? 1 : -1;
+        }
+        out.occupied[out.Index(x, y, z)] = inside > 0;
       }
     }
   }
+  return out;
+}
+
+double HullVolumeIoU(const VoxelGrid& hull, const TriangleMesh& truth) {
+  if (truth.indices.empty()) return 0;
+  const VoxelGrid t = TruthOccupancy(hull, truth);
+  const Eigen::Vector3i shift = ((hull.origin_m - t.origin_m) / hull.voxel_m).array().round().cast<int>();
+  int64_t inter = 0, uni = 0;
+  for (int z = 0; z < t.size.z(); ++z)
+    for (int y = 0; y < t.size.y(); ++y)
+      for (int x = 0; x < t.size.x(); ++x) {
+        const Eigen::Vector3i g = Eigen::Vector3i(x, y, z) - shift;
+        const bool in_hull = (g.array() >= 0).all() && (g.array() < hull.size.array()).all() && hull.occupied[hull.Index(g.x(), g.y(), g.z())];
+        const bool in_truth = t.occupied[t.Index(x, y, z)] != 0;
+        inter += in_truth && in_hull;
+        uni += in_truth || in_hull;
+      }
   return uni == 0 ? 1.0 : static_cast<double>(inter) / static_cast<double>(uni);
+}
+
+Mask RenderSilhouette(const StudioCameraModel& cam, const TriangleMesh& mesh) {
+  const PinholeIntrinsics& k = cam.intrinsics;
+  Mask m{k.width, k.height, std::vector<uint8_t>(static_cast<size_t>(k.width) * k.height, 0)};
+  const Rigid3d camera_from_world = cam.world_from_camera.Inverse();
+  for (size_t t = 0; t < mesh.TriangleCount(); ++t) {
+    Eigen::Vector2d uv[3];
+    for (int i = 0; i < 3; ++i) {
+      const Eigen::Vector3d p = camera_from_world * (mesh.origin + mesh.positions[mesh.indices[3 * t + i]].cast<double>());
+      uv[i] = Eigen::Vector2d(k.fx * p.x() / p.z() + k.cx, k.fy * p.y() / p.z() + k.cy);
+    }
+    const double area = (uv[1] - uv[0]).x() * (uv[2] - uv[0]).y() - (uv[1] - uv[0]).y() * (uv[2] - uv[0]).x();
+    if (std::abs(area) < 1e-12) continue;
+    const int u0 = std::max(0, static_cast<int>(std::ceil(std::min({uv[0].x(), uv[1].x(), uv[2].x()}))));
+    const int u1 = std::min(k.width - 1, static_cast<int>(std::floor(std::max({uv[0].x(), uv[1].x(), uv[2].x()}))));
+    const int v0 = std::max(0, static_cast<int>(std::ceil(std::min({uv[0].y(), uv[1].y(), uv[2].y()}))));
+    const int v1 = std::min(k.height - 1, static_cast<int>(std::floor(std::max({uv[0].y(), uv[1].y(), uv[2].y()}))));
+    for (int v = v0; v <= v1; ++v)
+      for (int u = u0; u <= u1; ++u) {
+        bool in = true;
+        for (int i = 0; i < 3 && in; ++i) {
+          const Eigen::Vector2d& a = uv[(i + 1) % 3];
+          const Eigen::Vector2d& c = uv[(i + 2) % 3];
+          in = ((c.x() - a.x()) * (v - a.y()) - (c.y() - a.y()) * (u - a.x())) / area >= 0;
+        }
+        if (in) m.data[static_cast<size_t>(v) * k.width + u] = 255;
+      }
+  }
+  return m;
+}
+
+TriangleMesh UprightPrism(const Eigen::Vector2d& centre, double radius_m, double height_m, int sides, double yaw_rad) {
+  TriangleMesh m;
+  for (int i = 0; i < sides; ++i) {
+    const double a = yaw_rad + 2 * kPi * i / sides;
+    for (double z : {0.0, height_m})
+      m.positions.push_back(Eigen::Vector3f(static_cast<float>(centre.x() + radius_m * std::cos(a)), static_cast<float>(centre.y() + radius_m * std::sin(a)),
+                                            static_cast<float>(z)));
+  }
+  const uint32_t bottom = static_cast<uint32_t>(m.positions.size());
+  m.positions.push_back(Eigen::Vector3f(static_cast<float>(centre.x()), static_cast<float>(centre.y()), 0));
+  m.positions.push_back(Eigen::Vector3f(static_cast<float>(centre.x()), static_cast<float>(centre.y()), static_cast<float>(height_m)));
+  for (int i = 0; i < sides; ++i) {  // counter-clockwise seen from outside
+    const uint32_t b0 = 2 * i, t0 = b0 + 1, b1 = 2 * ((i + 1) % sides), t1 = b1 + 1;
+    m.indices.insert(m.indices.end(), {b0, b1, t1, b0, t1, t0, bottom, b1, b0, bottom + 1, t0, t1});
+  }
+  return m;
+}
+
+std::vector<TriangleMesh> MeshParts(const TriangleMesh& mesh) {
+  const std::vector<int> part = TrianglePart(mesh.indices, mesh.positions.size());
+  const int parts = part.empty() ? 0 : *std::max_element(part.begin(), part.end()) + 1;
+  std::vector<TriangleMesh> out(parts);
+  std::vector<std::unordered_map<uint32_t, uint32_t>> remap(parts);
+  for (size_t t = 0; t < part.size(); ++t) {
+    TriangleMesh& m = out[part[t]];
+    m.origin = mesh.origin;
+    for (int i = 0; i < 3; ++i) {
+      const uint32_t v = mesh.indices[3 * t + i];
+      const auto [it, added] = remap[part[t]].emplace(v, static_cast<uint32_t>(m.positions.size()));
+      if (added) m.positions.push_back(mesh.positions[v]);
+      m.indices.push_back(it->second);
+    }
+  }
+  return out;
 }
 
 double ChamferMm(const SurfaceMesh& mesh, const TriangleMesh& truth, int samples) {

@@ -4,7 +4,11 @@
 // the accuracy per voxel size is ave-bench studio's.
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <cstdio>
+
 #include "model_store/studio/reconstruct.h"
+#include "sensor_agent/sim/studio.h"
 #include "tests/truth/studio_truth.h"
 
 namespace ave::studio::testing {
@@ -54,9 +58,10 @@ TEST_F(StudioTruth, ShadowRemovalKeepsTheShadowOutOfTheSilhouettes) {
 }
 
 TEST_F(StudioTruth, HullMatchesTheTrueActor) {
-  // The visual hull of a walking body is larger than the body (the gaps between legs and between
-  // arms and torso are hidden in most views): IoU ~0.83 (ave-bench studio), the same as strict
-  // carving since no camera is bad here.
+  // The visual hull of this walking body is larger than the body: the gaps between legs and
+  // between arms and torso are hidden in most views, and every limb is a box whose hull grows
+  // wedges between the 13 ring directions (ConvexActorsHullIsTight): IoU ~0.83 (ave-bench
+  // studio), the same as strict carving since no camera is bad here.
   EXPECT_GT(good_iou_, 0.78);
   ReconstructOptions strict = Options20mm();
   strict.hull.max_background_votes = 0;
@@ -120,6 +125,137 @@ TEST_F(StudioTruth, WrongImageSizeNamesTheCamera) {
   absl::StatusOr<FrameSetResult> r = ReconstructFrameSet(set_->cameras, images, set_->backgrounds, Options20mm());
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.status().message().find(set_->cameras[5].id), std::string::npos) << r.status();
+}
+
+// --- the measurement itself ---
+
+// The actor is closed boxes, 8 vertices and 12 triangles each (sim/studio.cc). An inside test
+// that owes nothing to winding: inside a box when on its centroid's side of all its faces' planes.
+bool InsideSomeBox(const TriangleMesh& m, const Eigen::Vector3d& p) {
+  for (size_t b = 0; 8 * b < m.positions.size(); ++b) {
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+    for (size_t k = 0; k < 8; ++k) centroid += m.positions[8 * b + k].cast<double>() / 8;
+    bool inside = true;
+    for (size_t t = 12 * b; t < 12 * b + 12 && inside; ++t) {
+      const Eigen::Vector3d a = m.positions[m.indices[3 * t]].cast<double>(), u = m.positions[m.indices[3 * t + 1]].cast<double>() - a,
+                            v = m.positions[m.indices[3 * t + 2]].cast<double>() - a;
+      const Eigen::Vector3d n = u.cross(v);
+      inside = n.dot(p - a) * n.dot(centroid - a) > 0;
+    }
+    if (inside) return true;
+  }
+  return false;
+}
+
+// Signed volume of box b (positive when wound outward).
+double BoxVolume(const TriangleMesh& m, size_t b) {
+  double v = 0;
+  for (size_t t = 12 * b; t < 12 * b + 12; ++t) {
+    v += m.positions[m.indices[3 * t]].cast<double>().dot(
+             m.positions[m.indices[3 * t + 1]].cast<double>().cross(m.positions[m.indices[3 * t + 2]].cast<double>())) / 6;
+  }
+  return v;
+}
+
+// A 1-voxel lattice at an odd offset: TruthOccupancy widens it to the truth's box.
+VoxelGrid Lattice(double voxel_m) {
+  VoxelGrid g;
+  g.origin_m = Eigen::Vector3d(-1.2373, -1.1131, -0.0437);
+  g.voxel_m = voxel_m;
+  g.size = Eigen::Vector3i::Ones();
+  g.occupied = {0};
+  return g;
+}
+
+TEST(StudioTruthMetric, TruthVolumeIsTheUnionOfTheActorsBoxes) {
+  for (double t_s : {0.3, 1.4}) {  // legs apart and arms swung, either way
+    TriangleMesh actor = sim::StudioActorMesh(t_s);
+    ASSERT_EQ(actor.positions.size() % 8, 0u);
+    const size_t boxes = actor.positions.size() / 8;
+    ASSERT_EQ(actor.indices.size(), 36 * boxes);
+    double sum_m3 = 0;
+    for (size_t b = 0; b < boxes; ++b) {
+      EXPECT_GT(BoxVolume(actor, b), 0) << "box " << b << " at " << t_s << " s is wound inward";
+      sum_m3 += std::abs(BoxVolume(actor, b));
+    }
+    const VoxelGrid truth = TruthOccupancy(Lattice(0.015), actor);
+    int64_t count = 0, wrong = 0;
+    for (int z = 0; z < truth.size.z(); ++z)
+      for (int y = 0; y < truth.size.y(); ++y)
+        for (int x = 0; x < truth.size.x(); ++x) {
+          const bool in = truth.occupied[truth.Index(x, y, z)] != 0;
+          count += in;
+          wrong += in != InsideSomeBox(actor, truth.Center(x, y, z));
+        }
+    EXPECT_EQ(wrong, 0) << "at " << t_s << " s";
+    // The boxes overlap (hips, shoulders, neck): their union is smaller than their sum, and the
+    // voxel count is that union's volume to within the voxels' sampling.
+    const double union_m3 = static_cast<double>(count) * std::pow(truth.voxel_m, 3);
+    EXPECT_LT(union_m3, sum_m3 - 0.001) << "at " << t_s << " s";
+    EXPECT_GT(union_m3, 0.8 * sum_m3);
+    // One box wound inward and overlapping another (the left thigh, into the torso's hip region)
+    // is still inside: the same occupancy.
+    TriangleMesh flipped = actor;
+    for (size_t t = 0; t < 12; ++t) std::swap(flipped.indices[3 * t + 1], flipped.indices[3 * t + 2]);
+    EXPECT_LT(BoxVolume(flipped, 0), 0);
+    EXPECT_EQ(TruthOccupancy(Lattice(0.015), flipped).occupied, truth.occupied) << "at " << t_s << " s";
+    // The truth scored against itself.
+    EXPECT_DOUBLE_EQ(HullVolumeIoU(truth, actor), 1.0);
+  }
+}
+
+// Share of the truth's voxels the hull holds (1: the hull contains the truth, as it must).
+double Recall(const VoxelGrid& hull, const TriangleMesh& truth) {
+  const VoxelGrid t = TruthOccupancy(hull, truth);
+  const Eigen::Vector3i shift = ((hull.origin_m - t.origin_m) / hull.voxel_m).array().round().cast<int>();
+  int64_t in = 0, held = 0;
+  for (int z = 0; z < t.size.z(); ++z)
+    for (int y = 0; y < t.size.y(); ++y)
+      for (int x = 0; x < t.size.x(); ++x) {
+        if (!t.occupied[t.Index(x, y, z)]) continue;
+        ++in;
+        const Eigen::Vector3i g = Eigen::Vector3i(x, y, z) - shift;
+        held += (g.array() >= 0).all() && (g.array() < hull.size.array()).all() && hull.occupied[hull.Index(g.x(), g.y(), g.z())];
+      }
+  return in ? static_cast<double>(held) / static_cast<double>(in) : 0.0;
+}
+
+TEST_F(StudioTruth, ConvexActorsHullIsTight) {
+  // A smooth convex actor is its own visual hull up to the views' polygon (14 views: < 1 % for a
+  // cylinder): it must score close to 1, else the carve's bounds, voxel centres, projection or the
+  // metric are off. A box is convex too but its hull is not tight: between two of the 13 ring
+  // directions (13.8 deg apart) each face grows a wedge up to L tan(6.9 deg) / 2 high, ~12 % of
+  // its volume at this yaw (2D construction, docs/BENCHMARKS.md), whatever its size; it must
+  // still hold the whole box.
+  const struct {
+    const char* name;
+    TriangleMesh mesh;
+    double min_iou, max_iou, max_chamfer_mm;
+  } actors[] = {
+      {"cylinder r 0.17 m", UprightPrism({-0.3, 0.45}, 0.17, 1.75, 48, 0), 0.97, 1.0, 3.0},
+      {"box 0.34 x 0.34 x 1.7 m", UprightPrism({0.6, 0.1}, 0.24, 1.7, 4, 0.4), 0.86, 0.92, 12.0},
+  };
+  for (const auto& a : actors) {
+    std::vector<Mask> masks;
+    for (const StudioCameraModel& cam : set_->cameras) masks.push_back(RenderSilhouette(cam, a.mesh));
+    for (int k : {0, 1}) {
+      HullOptions o;
+      o.voxel_m = 0.01;
+      o.max_background_votes = k;
+      absl::StatusOr<VoxelGrid> hull = CarveVisualHull(set_->cameras, masks, o);
+      ASSERT_TRUE(hull.ok()) << hull.status();
+      const double iou = HullVolumeIoU(*hull, a.mesh);
+      absl::StatusOr<SurfaceMesh> surface = ExtractSurface(*hull, {});
+      ASSERT_TRUE(surface.ok());
+      const double chamfer = ChamferMm(*surface, a.mesh);
+      std::printf("%s, K = %d: IoU %.4f, recall %.4f, Chamfer %.2f mm, hull %.4f m3\n", a.name, k, iou, Recall(*hull, a.mesh), chamfer,
+                  hull->Count() * 1e-6);
+      EXPECT_GT(iou, a.min_iou) << a.name << ", K = " << k;
+      EXPECT_LT(iou, a.max_iou) << a.name << ", K = " << k;
+      EXPECT_GT(Recall(*hull, a.mesh), 0.99) << a.name << ", K = " << k;
+      EXPECT_LT(chamfer, a.max_chamfer_mm) << a.name << ", K = " << k;
+    }
+  }
 }
 
 }  // namespace
