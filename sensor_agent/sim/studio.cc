@@ -156,7 +156,10 @@ std::vector<StudioCamera> StudioCameras(const StudioSpec& spec) {
   return cams;
 }
 
-StudioView RenderStudioView(const StudioCamera& camera, const EffectSet& effects, uint64_t seed, int64_t frame_index, double t_s) {
+namespace {
+
+StudioView RenderView(const StudioCamera& camera, const EffectSet& effects, uint64_t seed, int64_t frame_index, double t_s,
+                      bool with_actor) {
   StudioView view;
   const PinholeIntrinsics& k = camera.intrinsics;
   if (!k.Check().empty() || !std::isfinite(t_s)) return view;
@@ -177,7 +180,8 @@ StudioView RenderStudioView(const StudioCamera& camera, const EffectSet& effects
   // Actor: z-buffered rasterisation; a pixel is covered when its centre is inside a triangle.
   std::vector<float> depth(static_cast<size_t>(w) * h, std::numeric_limits<float>::infinity());
   std::vector<int32_t> tri_at(static_cast<size_t>(w) * h, -1);
-  for (size_t t = 0; t < actor.TriangleCount(); ++t) {
+  // The empty studio (with_actor false) rasterises no triangle and casts no shadow.
+  for (size_t t = 0; with_actor && t < actor.TriangleCount(); ++t) {
     Vector3d pc[3];
     Eigen::Vector2d uv[3];
     bool ok = true;
@@ -242,7 +246,7 @@ StudioView RenderStudioView(const StudioCamera& camera, const EffectSet& effects
         const Vector3d p = eye + s * d;
         if (s > 0 && p.head<2>().norm() < kFloorRadius_m) {
           rgb = FloorColor(p.x(), p.y());
-          if ((p.head<2>().array() >= shadow_lo.array()).all() && (p.head<2>().array() <= shadow_hi.array()).all() &&
+          if (with_actor && (p.head<2>().array() >= shadow_lo.array()).all() && (p.head<2>().array() <= shadow_hi.array()).all() &&
               actor_bvh.Raycast(p, light, 1e-6, 10).has_value()) {
             rgb *= kShadowFactor;
             view.shadow[idx] = 255;
@@ -272,6 +276,17 @@ StudioView RenderStudioView(const StudioCamera& camera, const EffectSet& effects
     view.bgr = std::move(image.bgr);
   }
   return view;
+}
+
+}  // namespace
+
+StudioView RenderStudioView(const StudioCamera& camera, const EffectSet& effects, uint64_t seed, int64_t frame_index, double t_s) {
+  return RenderView(camera, effects, seed, frame_index, t_s, /*with_actor=*/true);
+}
+
+StudioView RenderStudioBackground(const StudioCamera& camera, const EffectSet& effects, uint64_t seed) {
+  // Frame index -1: its own noise draw, not a copy of any frame's.
+  return RenderView(camera, effects, seed, -1, 0.0, /*with_actor=*/false);
 }
 
 absl::Status SimulateStudio(const StudioSpec& spec, const EffectSet& effects, uint64_t seed, const std::string& out_dir) {
@@ -315,6 +330,10 @@ absl::Status SimulateStudio(const StudioSpec& spec, const EffectSet& effects, ui
   for (const StudioCamera& cam : cams) {
     const std::string dir = out_dir + "/" + cam.id;
     if (const std::string why = internal::MakeDirs(dir); !why.empty()) return absl::InternalError(why);
+    StudioView empty = RenderStudioBackground(cam, effects, seed);
+    if (!cv::imwrite(dir + "/background.png", cv::Mat(empty.height, empty.width, CV_8UC3, empty.bgr.data()))) {
+      return absl::InternalError("cannot write " + dir + "/background.png");
+    }
     for (int f = 0; f < frames; ++f) {
       StudioView view = RenderStudioView(cam, effects, seed, f, f / spec.fps);
       char name[32];

@@ -67,7 +67,12 @@ Eigen::Vector3d StudioLightDirection();
 // camera pipeline's effect functions, camera_effects.h; frame_index seeds them). Deterministic.
 StudioView RenderStudioView(const StudioCamera& camera, const EffectSet& effects, uint64_t seed, int64_t frame_index, double t_s);
 
-// Writes calibration.json and, per camera and frame, <camera>/image_NNNN.png and
+// The empty studio seen by one camera (the background plate a real studio records before the
+// actor walks in): the same render and effects, no actor and no shadow.
+StudioView RenderStudioBackground(const StudioCamera& camera, const EffectSet& effects, uint64_t seed);
+
+// Writes calibration.json, per camera <camera>/background.png (RenderStudioBackground) and, per
+// camera and frame, <camera>/image_NNNN.png and
 // <camera>/mask_NNNN.png into `out_dir`. Nothing is written when the spec is unusable.
 absl::Status SimulateStudio(const StudioSpec& spec, const EffectSet& effects, uint64_t seed, const std::string& out_dir);
 

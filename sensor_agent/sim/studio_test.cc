@@ -1,5 +1,6 @@
 #include "sensor_agent/sim/studio.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -131,6 +132,28 @@ TEST(Studio, DeterministicAndNoiseOnlyWhenNamed) {
   EXPECT_EQ(Evaluations(EffectKind::kCameraNoise), 2u);
 }
 
+TEST(Studio, BackgroundPlateIsTheStudioWithoutActorOrShadow) {
+  StudioSpec spec;
+  spec.width = 160;
+  spec.height = 120;
+  const StudioCamera cam = StudioCameras(spec)[2];
+  const StudioView view = RenderStudioView(cam, EffectSet{}, 1, 3, 0.3);
+  const StudioView plate = RenderStudioBackground(cam, EffectSet{}, 1);
+  ASSERT_EQ(plate.bgr.size(), view.bgr.size());
+  EXPECT_EQ(std::count(plate.silhouette.begin(), plate.silhouette.end(), 255), 0);
+  EXPECT_EQ(std::count(plate.shadow.begin(), plate.shadow.end(), 255), 0);
+  int differ = 0, covered = 0;
+  for (size_t i = 0; i < view.silhouette.size(); ++i) {
+    const bool actor = view.silhouette[i] || view.shadow[i];
+    covered += actor;
+    const bool same = view.bgr[3 * i] == plate.bgr[3 * i] && view.bgr[3 * i + 1] == plate.bgr[3 * i + 1] && view.bgr[3 * i + 2] == plate.bgr[3 * i + 2];
+    if (!actor) EXPECT_TRUE(same) << "pixel " << i;  // away from the actor and its shadow: the same studio
+    differ += actor && !same;
+  }
+  EXPECT_GT(covered, 100);
+  EXPECT_GT(differ, covered / 2);
+}
+
 TEST(Studio, WritesImagesMasksAndCalibration) {
   StudioSpec spec;
   spec.cameras = 3;
@@ -150,6 +173,8 @@ TEST(Studio, WritesImagesMasksAndCalibration) {
       ASSERT_EQ(mask.size(), image.size());
       EXPECT_GT(cv::countNonZero(mask), 50);
     }
+    const cv::Mat plate = cv::imread(dir + "/" + cam + "/background.png", cv::IMREAD_COLOR);
+    ASSERT_FALSE(plate.empty()) << cam;
   }
   std::ifstream json(dir + "/calibration.json");
   std::stringstream ss;

@@ -48,6 +48,11 @@ Runner AddLidarBench(CLI::App& sub);
 // and server time, next to a camera frame of the same scene (lidar_wire_bench.cc).
 Runner AddLidarWireBench(CLI::App& sub);
 
+// `ave-bench studio` (issue 17): 4D studio reconstruction vs the simulator's truth: silhouette,
+// volume IoU, Chamfer, texture error per voxel size vs ms per frame set, VTK and flat-carving peers
+// (studio_bench.cc).
+Runner AddStudioBench(CLI::App& sub);
+
 // Pins the process to one CPU and keeps OpenCV single-threaded, so figures are per core.
 void UseOneCore();
 
