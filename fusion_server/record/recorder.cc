@@ -55,6 +55,11 @@ std::string RecorderOptions::Check() const {
   return "";
 }
 
+int64_t WallNowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
 absl::StatusOr<std::string> ReadSegmentBytes(const std::string& dir, const std::string& segment_path, int64_t offset,
                                              int64_t length) {
   const fs::path path = fs::path(dir) / segment_path;
@@ -106,8 +111,7 @@ Recorder::~Recorder() {
 
 int64_t Recorder::NowNs() const {
   if (options_.clock_ns) return options_.clock_ns();
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
-      .count();
+  return WallNowNs();
 }
 
 absl::Status Recorder::Repair() {

@@ -149,6 +149,9 @@ class Recorder {
   std::thread thread_;
 };
 
+// The server's wall clock (system_clock) in ns: the clock recorded times are on.
+int64_t WallNowNs();
+
 // Reads `length` bytes at `offset` of `<dir>/<segment_path>`: NotFound when the file is gone,
 // DataLoss when it is shorter than the index says.
 absl::StatusOr<std::string> ReadSegmentBytes(const std::string& dir, const std::string& segment_path, int64_t offset,
