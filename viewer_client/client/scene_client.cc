@@ -311,12 +311,37 @@ void SceneClient::Loop(SubscribeOptions options) {
       }
     }
     ++subscriptions_;
-    auto reader = stub->Subscribe(context.get(), request);
+    std::unique_ptr<grpc::ClientReader<v1::SceneUpdate>> reader;
+    if (options.replay()) {
+      // The same request fields, as a replay from where the last one reached (a re-request after
+      // a change of views is a seek).
+      v1::ReplayRequest replay;
+      replay.set_viewer_id(request.viewer_id());
+      *replay.mutable_camera_ids() = request.camera_ids();
+      replay.set_start_time_ns(std::max(options.replay_from_ns, replay_time_ns_.load()));
+      replay.set_end_time_ns(options.replay_to_ns);
+      replay.set_rate(options.replay_rate);
+      replay.set_include_jpeg(request.include_jpeg());
+      *replay.mutable_views() = request.views();
+      replay.set_max_rate_hz(request.max_rate_hz());
+      reader = stub->Replay(context.get(), replay);
+    } else {
+      reader = stub->Subscribe(context.get(), request);
+    }
     v1::SceneUpdate update;
+    bool replay_end = false;
     while (reader->Read(&update)) {
       if (stop_.load()) {
         context->TryCancel();
         break;
+      }
+      if (update.has_replay()) {
+        replay_time_ns_ = update.replay().replay_time_ns();
+        replay_end = update.replay().end();
+        for (const v1::ReplayGap& gap : update.replay().gaps()) {
+          AVE_LOG(WARNING) << "viewer '" << viewer_id_ << "': replay gap in camera '" << gap.camera_id() << "' ("
+                           << gap.frames() << " frames): " << gap.reason();
+        }
       }
       backoff = std::chrono::milliseconds(200);
       {
@@ -382,9 +407,18 @@ void SceneClient::Loop(SubscribeOptions options) {
       reselect = resubscribe_;
     }
     if (reselect) continue;  // cancelled by SetViews: subscribe again at once with the new views
+    if (options.replay() && (replay_end || status.error_code() == grpc::StatusCode::NOT_FOUND ||
+                             status.error_code() == grpc::StatusCode::INVALID_ARGUMENT ||
+                             status.error_code() == grpc::StatusCode::FAILED_PRECONDITION)) {
+      if (!status.ok()) AVE_LOG(ERROR) << "viewer '" << viewer_id_ << "': replay refused: " << status.error_message();
+      replay_ended_ = true;
+      changed_.notify_all();
+      break;
+    }
     if (status.error_code() == grpc::StatusCode::UNAUTHENTICATED ||
         status.error_code() == grpc::StatusCode::PERMISSION_DENIED) {
       AVE_LOG(ERROR) << "viewer '" << viewer_id_ << "': refused: " << status.error_message();
+      replay_ended_ = options.replay();
       break;
     }
     AVE_LOG(WARNING) << "viewer '" << viewer_id_ << "': subscription ended (" << status.error_message()

@@ -1,6 +1,7 @@
 #include "viewer_client/client/viewer_app.h"
 
 #include <algorithm>
+#include <limits>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -53,6 +54,10 @@ std::string ViewerOptions::Check() const {
   if (!(max_rate_hz > 0)) return "max rate must be > 0";
   if (!eye.allFinite() || !target.allFinite() || (eye - target).norm() < 1e-6) return "eye and target must differ";
   if (max_frames < 0) return "frames must be >= 0";
+  if ((replay_from_ns != 0 || replay_to_ns != 0) && replay_to_ns <= replay_from_ns) {
+    return "--replay-to must be after --replay-from";
+  }
+  if (!(replay_rate >= 0.25f && replay_rate <= 16.0f)) return "--replay-rate must be 0.25 .. 16";
   if (!(browse_fov_deg > 5 && browse_fov_deg < 170)) return "browse fov must be in (5, 170) degrees";
   return {};
 }
@@ -214,7 +219,9 @@ class Session {
       c->Start({.camera_ids = options_.camera_filter, .max_rate_hz = options_.max_rate_hz, .include_jpeg = true,
                 .include_lidar_points = state_.lidar_points,
                 .decode_width = renderer_.options().video_layer_width,
-                .decode_height = renderer_.options().video_layer_height});
+                .decode_height = renderer_.options().video_layer_height,
+                .replay_from_ns = options_.replay_from_ns, .replay_to_ns = options_.replay_to_ns,
+                .replay_rate = options_.replay_rate});
     }
     return absl::OkStatus();
   }
@@ -577,6 +584,12 @@ absl::Status RunViewer(const ViewerOptions& options) {
       cams = session.Cameras();
       session.UpdateSelection(session.ComputeViews(cams, context->framebuffer_width(), context->framebuffer_height()));
       if (!cams.empty() && with_frames(cams) >= wanted(cams)) break;
+      if (options.replay_to_ns > 0 && session.client(0).replay_ended()) {
+        if (!session.client(0).last_error().empty()) {
+          return absl::NotFoundError("viewer: replay: " + session.client(0).last_error());
+        }
+        break;  // a short replay that ended before every camera showed a frame: draw what it left
+      }
       if (std::chrono::steady_clock::now() >= deadline) {
         std::string missing;
         for (const auto& c : cams)
@@ -588,29 +601,36 @@ absl::Status RunViewer(const ViewerOptions& options) {
       }
       session.client(0).WaitUntil([](const std::vector<CameraView>&) { return false; }, std::chrono::milliseconds(100));
     }
-    const int frames = std::max(1, options.max_frames);
+    // A replay draws until it ends (at most --frames when given); live, --frames frames.
+    const bool replay = options.replay_to_ns > 0;
+    const int frames = replay ? (options.max_frames > 0 ? options.max_frames : std::numeric_limits<int>::max())
+                              : std::max(1, options.max_frames);
     std::vector<View> views;
     double draw_s = 0;  // frames after the first (which compiles shaders and renders every shadow map)
     double cpu_at_second_frame = 0;
     uint64_t decoded_at_second_frame = 0;
+    int drawn_count = 0;
     for (int f = 0; f < frames; ++f) {
+      ++drawn_count;
       if (f == 1) {
         cpu_at_second_frame = ProcessCpuSeconds();
         decoded_at_second_frame = session.jpegs_decoded();
       }
       const auto frame_start = std::chrono::steady_clock::now();
-      absl::StatusOr<std::vector<View>> drawn = session.Draw(nullptr, f + 1 == frames || !options.record_dir.empty());
+      const bool last = f + 1 == frames || (replay && session.client(0).replay_ended());
+      absl::StatusOr<std::vector<View>> drawn = session.Draw(nullptr, last || !options.record_dir.empty());
       if (!drawn.ok()) return drawn.status();
       views = *std::move(drawn);
       (void)context->ReadPixels();  // waits for the GPU, so the time is the frame's
       if (f > 0) draw_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - frame_start).count();
       if (absl::Status s = after_frame(); !s.ok()) return s;
+      if (last) break;
       if (f + 1 < frames) std::this_thread::sleep_until(frame_start + std::chrono::microseconds(int64_t(1e6 / options.max_rate_hz)));
     }
-    if (frames > 1) {
-      AVE_LOG(INFO) << "viewer: " << frames - 1 << " frames after the first in " << draw_s << " s ("
-                    << 1e3 * draw_s / (frames - 1) << " ms per frame, read-back included; "
-                    << 1e3 * (ProcessCpuSeconds() - cpu_at_second_frame) / (frames - 1) << " CPU ms per frame, "
+    if (drawn_count > 1) {
+      AVE_LOG(INFO) << "viewer: " << drawn_count - 1 << " frames after the first in " << draw_s << " s ("
+                    << 1e3 * draw_s / (drawn_count - 1) << " ms per frame, read-back included; "
+                    << 1e3 * (ProcessCpuSeconds() - cpu_at_second_frame) / (drawn_count - 1) << " CPU ms per frame, "
                     << session.jpegs_decoded() - decoded_at_second_frame << " JPEG decodes, "
                     << (overlay ? overlay->redraws() : 0) << " overlay redraws); renderer: "
                     << (*renderer)->stats().shadow_map_renders << " shadow-map renders, "
