@@ -219,7 +219,13 @@ void Recorder::Loop() {
     const bool flush = stopping || draining || now >= next_flush;
     if (flush) {
       FlushBatch();
-      RunRetention();
+      // Retention reads every segment row: every 10 s of the recorder's clock, or each flush
+      // while recording is stopped for a full disk (it may free room and lets a frame try again).
+      const int64_t now_ns = NowNs();
+      if (disk_full_.load() || now_ns - last_retention_ns_ >= 10'000'000'000) {
+        last_retention_ns_ = now_ns;
+        RunRetention();
+      }
       next_flush = now + options_.flush_period;
     }
     {

@@ -140,6 +140,7 @@ class Recorder {
   std::vector<SegmentRow> closed_pending_;  // closed since the last commit (their final rows)
   int64_t last_objects_ns_ = 0;
   bool probe_ = false;  // while full: the next frame may try to write (set once per flush)
+  int64_t last_retention_ns_ = 0;
 
   std::atomic<uint64_t> frames_recorded_{0}, bytes_recorded_{0}, sweeps_recorded_{0}, objects_recorded_{0};
   std::atomic<uint64_t> queue_drops_{0}, disk_full_skips_{0}, disk_full_events_{0}, write_errors_{0};

@@ -34,6 +34,9 @@ grpc::Status CheckReplayRequest(const v1::ReplayRequest& request) {
                           "camera_ids: '" + id.substr(0, 80) + "' is not a camera id ([A-Za-z0-9_.-], 1..64)");
     }
   }
+  if (!request.purpose().empty() && request.purpose() != "export") {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "purpose: must be empty or \"export\"");
+  }
   if (request.end_time_ns() <= request.start_time_ns()) {
     return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
                         absl::StrCat("end_time_ns (", request.end_time_ns(), ") must be after start_time_ns (",
@@ -56,11 +59,11 @@ grpc::Status SceneServiceImpl::Replay(grpc::ServerContext* context, const v1::Re
   Principal principal;
   if (grpc::Status s = AuthorizeCall(shared_, *context, Action::kSubscribe, {}, {}, &principal); !s.ok()) return s;
   if (grpc::Status s = CheckReplayRequest(*request); !s.ok()) return s;
+  ViewerCursor cursor;
+  if (grpc::Status s = SelectionViews(request->views(), chunks_, floor_z_, cursor); !s.ok()) return s;
   if (!shared_.recorder) {
     return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION, "this server does not record (start it with --record-dir)");
   }
-  ViewerCursor cursor;
-  if (grpc::Status s = SelectionViews(request->views(), chunks_, floor_z_, cursor); !s.ok()) return s;
   const std::vector<std::string> camera_ids(request->camera_ids().begin(), request->camera_ids().end());
   const double rate = request->rate() > 0 ? request->rate() : 1.0;
   const std::string viewer = request->viewer_id().empty() ? context->peer() : request->viewer_id();
@@ -73,7 +76,9 @@ grpc::Status SceneServiceImpl::Replay(grpc::ServerContext* context, const v1::Re
       absl::StrCat("{\"viewer\":\"", viewer.size() <= 128 ? viewer : viewer.substr(0, 128), "\",\"cameras\":\"",
                    cameras_text, "\",\"from_ns\":", request->start_time_ns(), ",\"to_ns\":", request->end_time_ns(),
                    ",\"rate\":", rate, "}");
-  if (auto s = shared_.store.AppendAudit(actor, "Replay", cameras_text, "", range_json); !s.ok()) {
+  if (auto s = shared_.store.AppendAudit(actor, request->purpose() == "export" ? "Export" : "Replay", cameras_text, "",
+                                        range_json);
+      !s.ok()) {
     AVE_LOG(ERROR) << "audit write failed: " << s.status().message();
   }
 

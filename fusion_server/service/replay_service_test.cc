@@ -8,7 +8,9 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
 
+#include "fusion_server/admin/export.h"
 #include "fusion_server/record/record_index.h"
 #include "fusion_server/service/test_fixtures.h"
 #include "model_store/common/log.h"
@@ -219,6 +221,29 @@ TEST_F(ReplayServiceTest, RemovedCameraStillReplaysAndADeletedSegmentIsAGap) {
     missing += gap.frames();
   }
   EXPECT_EQ(missing, static_cast<uint32_t>(kFrames));
+}
+
+TEST_F(ReplayServiceTest, ExportWritesEveryRecordedFrameOfTheCameraAsMotionJpegAndIsAudited) {
+  const std::string out = (server_.dir() / "cam2.avi").string();
+  auto done = ExportClip(channel_, kAdmin, {"cam2", base_ns_, base_ns_ + 2 * kFrames * kFrameNs, out});
+  ASSERT_TRUE(done.ok()) << done.status();
+  EXPECT_EQ(done->frames, kFrames);
+  EXPECT_EQ(done->gaps, 0);
+  EXPECT_NEAR(done->fps, 1e9 / kFrameNs, 0.01);
+  cv::VideoCapture clip(out);
+  ASSERT_TRUE(clip.isOpened());
+  int read = 0;
+  for (cv::Mat frame; clip.read(frame); ++read) {
+    EXPECT_EQ(frame.cols, 64);
+    EXPECT_EQ(frame.rows, 48);
+  }
+  EXPECT_EQ(read, kFrames);
+  auto store = store::Store::Open(server_.store_path());
+  auto audit = (*store)->ListAudit(10);
+  ASSERT_TRUE(audit.ok());
+  EXPECT_TRUE(std::any_of(audit->begin(), audit->end(), [](const auto& a) { return a.action == "Export" && a.target == "cam2"; }));
+  auto bad = ExportClip(channel_, kAdmin, {"cam2", base_ns_, base_ns_ + 1, (server_.dir() / "x.mp4").string()});
+  EXPECT_THAT(bad.status().message(), HasSubstr(".mkv or .avi"));
 }
 
 }  // namespace

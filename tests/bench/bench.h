@@ -48,6 +48,10 @@ Runner AddLidarBench(CLI::App& sub);
 // and server time, next to a camera frame of the same scene (lidar_wire_bench.cc).
 Runner AddLidarWireBench(CLI::App& sub);
 
+// `ave-bench record` (issue 18): server CPU with recording on vs off under ave-loadgen's load, MB/s
+// written, recorder drops, seek and replay start-up latency, index bytes per hour (record_bench.cc).
+Runner AddRecordBench(CLI::App& sub);
+
 // Pins the process to one CPU and keeps OpenCV single-threaded, so figures are per core.
 void UseOneCore();
 
