@@ -273,7 +273,12 @@ int Run(const Options& o) {
   // Replay start-up through a server: the Replay call until its first update arrives.
   auto again = StartServer(on_dir, rec.string());
   if (!again.ok()) return std::cerr << "ave-bench record: " << again.status().message() << "\n", 1;
-  auto stub = v1::SceneService::NewStub(grpc::CreateChannel(again->address, grpc::InsecureChannelCredentials()));
+  // A replay's first update carries every camera's image at the seek point: with many cameras it
+  // passes gRPC's default 4 MB receive limit, so allow what the server may send (16 MB).
+  grpc::ChannelArguments args;
+  args.SetMaxReceiveMessageSize(16 << 20);
+  auto stub = v1::SceneService::NewStub(
+      grpc::CreateCustomChannel(again->address, grpc::InsecureChannelCredentials(), args));
   std::vector<double> startup_ms;
   for (int i = 0; i < 10; ++i) {
     grpc::ClientContext context;
@@ -286,9 +291,11 @@ int Run(const Options& o) {
     const auto t0 = Clock::now();
     auto reader = stub->Replay(&context, request);
     v1::SceneUpdate update;
-    if (reader->Read(&update)) startup_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+    const bool got = reader->Read(&update);
+    if (got) startup_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
     context.TryCancel();
-    reader->Finish();
+    const grpc::Status status = reader->Finish();
+    if (!got) std::cerr << "ave-bench record: replay start-up: " << status.error_message() << "\n";
   }
   StopServer(*again);
 
