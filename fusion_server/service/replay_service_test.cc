@@ -147,6 +147,25 @@ TEST_F(ReplayServiceTest, SteppedReplayGivesEveryFrameInServerCaptureOrderWithIt
   EXPECT_THAT(replay_row->after_json, HasSubstr(absl::StrCat("\"from_ns\":", base_ns_)));
 }
 
+// Data selection as live (issue 7): a view volume the cameras' frusta do not meet (the unit cube
+// at the origin; both cameras look down from 10 m to beyond it) gets poses and status, no JPEG.
+TEST_F(ReplayServiceTest, ViewFrustaSelectTheReplayedFramesAsLive) {
+  v1::ReplayRequest request = Request(base_ns_, base_ns_ + 2 * kFrames * kFrameNs);
+  request.set_max_updates(1000);
+  v1::ViewFrustum* view = request.add_views();
+  for (int k = 0; k < 16; ++k) view->add_view_projection(k % 5 == 0 ? 1.f : 0.f);
+  std::vector<v1::SceneUpdate> updates;
+  ASSERT_TRUE(Replay(request, updates).ok());
+  ASSERT_FALSE(updates.empty());
+  int jpegs = 0;
+  for (const v1::SceneUpdate& update : updates) {
+    EXPECT_EQ(update.cameras_size(), 2);
+    for (const v1::CameraState& cam : update.cameras()) jpegs += !cam.jpeg().empty();
+  }
+  EXPECT_EQ(jpegs, 0);
+  EXPECT_EQ(updates.back().cameras(0).frame_sequence(), static_cast<uint64_t>(kFrames));
+}
+
 TEST_F(ReplayServiceTest, PacedReplayEndsWithEveryCamerasLastFrame) {
   v1::ReplayRequest request = Request(base_ns_, base_ns_ + (kFrames + 2) * kFrameNs);
   request.set_rate(16);
