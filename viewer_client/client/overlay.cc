@@ -397,6 +397,19 @@ void Overlay::Panel(const std::vector<CameraView>& cameras, const OverlayStats& 
                   lidar.tracks.size(), lidar.points ? lidar.points->p_local.size() : size_t{0});
     }
   }
+  if (ImGui::CollapsingHeader("Replay")) {
+    // Drag "back" to choose where to start; "play" seeks there (one indexed lookup on the server).
+    ImGui::SliderFloat("back", &state.replay_back_s, 1, 3600, "%.0f s before now", ImGuiSliderFlags_Logarithmic);
+    ImGui::SliderFloat("rate", &state.replay_rate, 0.25f, 16, "%.2fx", ImGuiSliderFlags_Logarithmic);
+    using Command = OverlayState::ReplayCommand;
+    if (ImGui::Button("play")) state.replay_command = Command::kPlay;
+    ImGui::SameLine();
+    if (ImGui::Button("pause")) state.replay_command = Command::kPause;
+    ImGui::SameLine();
+    if (ImGui::Button("live")) state.replay_command = Command::kLive;
+    ImGui::SameLine();
+    ImGui::TextUnformatted(state.replay_status.c_str());
+  }
   ImGui::Text("subscriptions: %llu  servers: %d", static_cast<unsigned long long>(stats.subscriptions), stats.servers);
   ImGui::PopItemWidth();
   ImGui::End();

@@ -33,6 +33,14 @@ struct OverlayState {
   bool lidar_points = true;
   std::string selected_camera;                  // highlighted in every view
   std::array<std::string, 3> locked;            // cameras of the three locked views ("" = plan view)
+  // Replay (issue 18), the panel's "Replay" section: play the recording from replay_back_s seconds
+  // before now at replay_rate, pause where it is, or go back to live. The viewer consumes
+  // replay_command each frame and sets replay_status for the panel.
+  enum class ReplayCommand { kNone, kPlay, kPause, kLive };
+  ReplayCommand replay_command = ReplayCommand::kNone;
+  float replay_back_s = 60;
+  float replay_rate = 1;
+  std::string replay_status = "live";
 };
 
 // Figures the panel shows.

@@ -142,6 +142,8 @@ absl::StatusOr<TriangleMesh> SceneClient::FetchStaticModel(uint64_t* version) {
 void SceneClient::Start(const SubscribeOptions& options) {
   Stop();
   stop_ = false;
+  replay_ended_ = false;
+  replay_time_ns_ = 0;
   reselect_interval_ = options.reselect_interval;
   {
     std::lock_guard lock(mu_);

@@ -1,13 +1,14 @@
 #include "viewer_client/client/viewer_app.h"
 
 #include <algorithm>
-#include <limits>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <set>
 #include <thread>
+#include <utility>
 
 #include <grpcpp/grpcpp.h>
 #include <opencv2/core.hpp>
@@ -16,6 +17,7 @@
 
 #include "ave/net/tls.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "model_store/common/cpu_clock.h"
 #include "model_store/common/log.h"
 #include "model_store/geometry/bvh.h"
@@ -215,14 +217,14 @@ class Session {
     const int w = context_.framebuffer_width(), h = context_.framebuffer_height();
     const std::vector<View> first = ComputeViews({}, w, h);
     UpdateSelection(first);
-    for (auto& c : clients_) {
-      c->Start({.camera_ids = options_.camera_filter, .max_rate_hz = options_.max_rate_hz, .include_jpeg = true,
-                .include_lidar_points = state_.lidar_points,
-                .decode_width = renderer_.options().video_layer_width,
-                .decode_height = renderer_.options().video_layer_height,
-                .replay_from_ns = options_.replay_from_ns, .replay_to_ns = options_.replay_to_ns,
-                .replay_rate = options_.replay_rate});
-    }
+    subscribe_ = {.camera_ids = options_.camera_filter, .max_rate_hz = options_.max_rate_hz, .include_jpeg = true,
+                  .include_lidar_points = state_.lidar_points,
+                  .decode_width = renderer_.options().video_layer_width,
+                  .decode_height = renderer_.options().video_layer_height,
+                  .replay_from_ns = options_.replay_from_ns, .replay_to_ns = options_.replay_to_ns,
+                  .replay_rate = options_.replay_rate};
+    for (auto& c : clients_) c->Start(subscribe_);
+    if (subscribe_.replay()) state_.replay_status = "replay";
     return absl::OkStatus();
   }
 
@@ -301,7 +303,42 @@ class Session {
 
   // Draws one frame into the context's framebuffer; returns the views drawn. `saved`: the frame
   // goes to a PNG, so the overlay is redrawn if its content changed (no 4 Hz lag in pictures).
+  // The panel's replay controls (issue 18): the clients re-subscribe as a replay from the chosen
+  // time (or where a pause left it), stop where they are, or go back to the start-up subscription.
+  void ApplyReplay() {
+    using Command = OverlayState::ReplayCommand;
+    const Command command = std::exchange(state_.replay_command, Command::kNone);
+    SceneClient& first = *clients_[0];
+    if (command == Command::kNone) {
+      if (replaying_ && !paused_) {
+        state_.replay_status = first.replay_ended()
+                                   ? (first.last_error().empty() ? std::string("replay ended") : first.last_error())
+                                   : absl::StrFormat("%.0f s ago", (NowNs() - first.replay_time_ns()) * 1e-9);
+      }
+      return;
+    }
+    if (command == Command::kPause) {
+      for (auto& c : clients_) c->Stop();
+      paused_ = true;
+      state_.replay_status = "paused";
+      return;
+    }
+    SubscribeOptions o = subscribe_;
+    replaying_ = command == Command::kPlay;
+    if (replaying_) {
+      const int64_t now_ns = NowNs();
+      const bool resume = paused_ && first.replay_time_ns() > 0 && !first.replay_ended();
+      o.replay_from_ns = resume ? first.replay_time_ns() : now_ns - static_cast<int64_t>(state_.replay_back_s * 1e9);
+      o.replay_to_ns = now_ns;
+      o.replay_rate = state_.replay_rate;
+    }
+    paused_ = false;
+    for (auto& c : clients_) c->Start(o);
+    state_.replay_status = replaying_ ? "seeking" : "live";
+  }
+
   absl::StatusOr<std::vector<View>> Draw(const WindowInput* input, bool saved = false) {
+    ApplyReplay();
     const auto now = std::chrono::steady_clock::now();
     const double dt = std::chrono::duration<double>(now - last_frame_).count();
     last_frame_ = now;
@@ -480,6 +517,8 @@ class Session {
   Overlay* overlay_;
   BrowseCamera browse_;
   OverlayState state_;
+  SubscribeOptions subscribe_;  // the start-up subscription (live, or the --replay-* one)
+  bool replaying_ = false, paused_ = false;  // the panel's replay (issue 18)
   bool auto_locked_ = false;
   std::optional<DisplayOptions> applied_display_;
   std::vector<std::unique_ptr<SceneClient>> clients_;
