@@ -2,7 +2,9 @@
 
 #include <sqlite3.h>
 
+#include <algorithm>
 #include <map>
+#include <tuple>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -211,6 +213,28 @@ absl::Status RecordIndex::Commit(IndexBatch& batch) {
     }
   }
   return absl::OkStatus();
+}
+
+std::vector<RecordedIntervals> MergeSegmentIntervals(std::vector<SegmentRow> segments,
+                                                     const std::vector<std::string>& sensor_ids, int64_t merge_gap_ns) {
+  std::sort(segments.begin(), segments.end(), [](const SegmentRow& a, const SegmentRow& b) {
+    return std::tie(a.sensor_id, a.start_ns, a.end_ns) < std::tie(b.sensor_id, b.start_ns, b.end_ns);
+  });
+  std::vector<RecordedIntervals> out;
+  for (const SegmentRow& seg : segments) {
+    if (seg.end_ns < seg.start_ns) continue;
+    if (!sensor_ids.empty() && std::find(sensor_ids.begin(), sensor_ids.end(), seg.sensor_id) == sensor_ids.end()) {
+      continue;
+    }
+    if (out.empty() || out.back().sensor_id != seg.sensor_id) out.push_back({seg.sensor_id, {}});
+    auto& intervals = out.back().intervals;
+    if (!intervals.empty() && seg.start_ns - intervals.back().second <= merge_gap_ns) {
+      intervals.back().second = std::max(intervals.back().second, seg.end_ns);
+    } else {
+      intervals.emplace_back(seg.start_ns, seg.end_ns);
+    }
+  }
+  return out;
 }
 
 absl::StatusOr<std::vector<SegmentRow>> RecordIndex::Segments() {

@@ -64,6 +64,18 @@ struct RecordedSpan {
   int64_t frames = 0;
 };
 
+// A sensor's recorded time, as intervals (the viewer's time line).
+struct RecordedIntervals {
+  std::string sensor_id;
+  std::vector<std::pair<int64_t, int64_t>> intervals;  // [first, last] capture ns, oldest first, disjoint
+};
+
+// Merges segment rows (any order) into each sensor's intervals: segments of one sensor that
+// overlap or lie at most `merge_gap_ns` apart are one interval. Sensors by id; only those in
+// `sensor_ids` (all when empty). Empty segments (end_ns < start_ns) are skipped.
+std::vector<RecordedIntervals> MergeSegmentIntervals(std::vector<SegmentRow> segments,
+                                                     const std::vector<std::string>& sensor_ids, int64_t merge_gap_ns);
+
 class RecordIndex {
  public:
   // Opens the store file written by store::Store (already migrated to schema >= 5).

@@ -60,6 +60,31 @@ RecorderOptions Options(const TempRecording& rec) {
   return o;
 }
 
+// The time line's intervals: one sensor's segments that touch or lie within the gap merge, a longer
+// break (a restart, a deleted stretch) stays a gap; the filter and empty segments.
+TEST(MergeSegmentIntervals, MergesCloseSegmentsPerSensorAndKeepsLongerBreaks) {
+  auto seg = [](std::string id, int64_t start, int64_t end) {
+    SegmentRow row;
+    row.sensor_id = std::move(id);
+    row.start_ns = start;
+    row.end_ns = end;
+    return row;
+  };
+  const std::vector<SegmentRow> segments = {seg("b", 100, 200), seg("a", 50, 60),  seg("a", 0, 40),
+                                            seg("a", 45, 55),   seg("a", 90, 95), seg("c", 10, 5)};
+  const std::vector<RecordedIntervals> merged = MergeSegmentIntervals(segments, {}, 5);
+  ASSERT_EQ(merged.size(), 2u);  // "c" holds only an empty segment
+  EXPECT_EQ(merged[0].sensor_id, "a");
+  using I = std::pair<int64_t, int64_t>;
+  EXPECT_EQ(merged[0].intervals, (std::vector<I>{{0, 60}, {90, 95}}));  // 40..45 merges, 60..90 is a gap
+  EXPECT_EQ(merged[1].sensor_id, "b");
+  EXPECT_EQ(merged[1].intervals, (std::vector<I>{{100, 200}}));
+  const std::vector<RecordedIntervals> only_b = MergeSegmentIntervals(segments, {"b"}, 5);
+  ASSERT_EQ(only_b.size(), 1u);
+  EXPECT_EQ(only_b[0].sensor_id, "b");
+  EXPECT_EQ(MergeSegmentIntervals(segments, {}, 30)[0].intervals.size(), 1u);  // 60..90 is within 30
+}
+
 TEST(Recorder, BytesExactlyAsReceivedIndexedInServerCaptureOrder) {
   TempRecording rec;
   std::map<std::pair<std::string, uint64_t>, std::string> sent;

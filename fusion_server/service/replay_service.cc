@@ -153,4 +153,48 @@ grpc::Status SceneServiceImpl::Replay(grpc::ServerContext* context, const v1::Re
   return grpc::Status::OK;
 }
 
+// The time line's data: index rows only (no image, pose or object leaves the server), so not
+// audited; a panel polls it every few seconds.
+grpc::Status SceneServiceImpl::RecordedSpans(grpc::ServerContext* context, const v1::RecordedSpansRequest* request,
+                                             v1::RecordedSpansResponse* response) {
+  if (grpc::Status s = AuthorizeCall(shared_, *context, Action::kSubscribe, {}, {}, nullptr); !s.ok()) return s;
+  if (request->camera_ids_size() > 4096) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "camera_ids: at most 4096 cameras");
+  }
+  for (const std::string& id : request->camera_ids()) {
+    if (!IsValidCameraId(id)) {
+      return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                          "camera_ids: '" + id.substr(0, 80) + "' is not a camera id ([A-Za-z0-9_.-], 1..64)");
+    }
+  }
+  if (request->merge_gap_ns() < 0) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "merge_gap_ns: must be 0 (2 s) or positive");
+  }
+  if (!shared_.recorder) {
+    return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION, "this server does not record (start it with --record-dir)");
+  }
+  absl::StatusOr<std::unique_ptr<record::RecordIndex>> index = record::RecordIndex::Open(options_.store_path);
+  if (!index.ok()) return ToGrpc(index.status());
+  absl::StatusOr<std::vector<record::SegmentRow>> segments = (*index)->Segments();
+  if (!segments.ok()) return ToGrpc(segments.status());
+  absl::StatusOr<std::vector<record::RecordedSpan>> spans = (*index)->Spans();
+  if (!spans.ok()) return ToGrpc(spans.status());
+  const std::vector<std::string> ids(request->camera_ids().begin(), request->camera_ids().end());
+  const int64_t gap_ns = request->merge_gap_ns() > 0 ? request->merge_gap_ns() : 2'000'000'000;
+  for (const record::RecordedIntervals& sensor : record::MergeSegmentIntervals(*std::move(segments), ids, gap_ns)) {
+    v1::RecordedCamera& camera = *response->add_cameras();
+    camera.set_camera_id(sensor.sensor_id);
+    for (const auto& [from_ns, to_ns] : sensor.intervals) {
+      v1::RecordedInterval& interval = *camera.add_intervals();
+      interval.set_from_ns(from_ns);
+      interval.set_to_ns(to_ns);
+    }
+    for (const record::RecordedSpan& span : *spans) {
+      if (span.sensor_id == sensor.sensor_id) camera.set_frames(static_cast<uint64_t>(span.frames));
+    }
+  }
+  response->set_server_time_ns(NowNs());
+  return grpc::Status::OK;
+}
+
 }  // namespace ave::internal

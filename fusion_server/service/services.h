@@ -75,6 +75,9 @@ class SceneServiceImpl final : public v1::SceneService::Service {
   // Issue 18 (replay_service.cc): the recorded scene as it was, paced; audited.
   grpc::Status Replay(grpc::ServerContext* context, const v1::ReplayRequest* request,
                       grpc::ServerWriter<v1::SceneUpdate>* writer) override;
+  // Issue 18: each camera's recorded intervals (the viewer's time line); index rows only.
+  grpc::Status RecordedSpans(grpc::ServerContext* context, const v1::RecordedSpansRequest* request,
+                             v1::RecordedSpansResponse* response) override;
 
  private:
   ServerShared& shared_;
