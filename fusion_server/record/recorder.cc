@@ -392,6 +392,13 @@ void Recorder::WriteItem(Item& item) {
   seg->dirty = true;
 }
 
+uint64_t Recorder::RecordedSequence(const std::string& sensor_id, int64_t since_received_ns) const {
+  std::lock_guard lock(mu_);
+  const auto it = recorded_sequence_.find(sensor_id);
+  if (it == recorded_sequence_.end() || it->second.second < since_received_ns) return 0;
+  return it->second.first;
+}
+
 void Recorder::FlushBatch() {
   const int64_t now_ns = NowNs();
   if (options_.objects_source && now_ns - last_objects_ns_ >= std::chrono::nanoseconds(options_.objects_period).count()) {
@@ -441,6 +448,11 @@ void Recorder::FlushBatch() {
     sweeps_recorded_.fetch_add(sweeps, std::memory_order_relaxed);
     objects_recorded_.fetch_add(objects, std::memory_order_relaxed);
     bytes_on_disk_ += new_bytes;
+    // Rows are in arrival order: the last of each sensor is its newest (a restarted agent's
+    // sequence may be lower than an earlier stream's).
+    std::lock_guard lock(mu_);
+    for (const FrameRow& f : batch_.frames) recorded_sequence_[f.sensor_id] = {f.sequence, f.received_ns};
+    for (const SweepRow& w : batch_.sweeps) recorded_sequence_[w.sensor_id] = {w.sequence, w.received_ns};
   }
   for (auto& [id, seg] : open_) seg.dirty = false;
   batch_ = IndexBatch();

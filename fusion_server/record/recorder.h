@@ -87,6 +87,11 @@ class Recorder {
   // The sensor's registry entry (serialized ave.v1.Camera), kept so that it replays after removal.
   void NoteSensor(const std::string& sensor_id, std::string camera_bytes);
 
+  // The sequence of the newest frame or sweep of `sensor_id` received at or after
+  // `since_received_ns` whose bytes and index row are committed (written, fdatasync'd, then one
+  // transaction); 0 when none. Acks carry it (SensorAck.recorded_sequence).
+  uint64_t RecordedSequence(const std::string& sensor_id, int64_t since_received_ns) const;
+
   // Blocks until everything submitted before the call is written and committed (or skipped).
   void Drain();
   RecorderStats Stats() const;
@@ -131,6 +136,8 @@ class Recorder {
   std::vector<std::pair<std::string, std::string>> sensors_pending_;
   uint64_t submitted_ = 0, written_ = 0, done_ = 0;  // items; done_: written and committed
   uint64_t flushes_ = 0;
+  // By sensor: (sequence, received_ns) of the newest frame or sweep committed.
+  std::map<std::string, std::pair<uint64_t, int64_t>> recorded_sequence_;
   int drain_waiters_ = 0;
   bool stop_ = false;
 

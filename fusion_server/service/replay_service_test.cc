@@ -3,6 +3,7 @@
 // their exact bytes, paced or stepped; roles, audit, empty ranges, removed cameras and deleted
 // segments as the issue lists them.
 #include <filesystem>
+#include <limits>
 #include <map>
 
 #include <gmock/gmock.h>
@@ -240,6 +241,89 @@ TEST_F(ReplayServiceTest, RemovedCameraStillReplaysAndADeletedSegmentIsAGap) {
     missing += gap.frames();
   }
   EXPECT_EQ(missing, static_cast<uint32_t>(kFrames));
+}
+
+// The panel's time line (issue 18): each camera's recorded interval on the server clock, viewers
+// allowed, sensors refused, a camera filter honoured, bad ids named.
+TEST_F(ReplayServiceTest, RecordedSpansGiveEachCamerasRecordedIntervalOnTheServerClock) {
+  auto spans = [&](const v1::RecordedSpansRequest& request, v1::RecordedSpansResponse& response,
+                   const std::string& token = kViewer) {
+    grpc::ClientContext context;
+    context.AddMetadata("authorization", "Bearer " + token);
+    return scene_->RecordedSpans(&context, request, &response);
+  };
+  v1::RecordedSpansResponse all;
+  const int64_t before_ns = NowNs();
+  ASSERT_TRUE(spans({}, all).ok());
+  EXPECT_GE(all.server_time_ns(), before_ns);
+  ASSERT_EQ(all.cameras_size(), 2);
+  for (const v1::RecordedCamera& camera : all.cameras()) {
+    const int64_t skew_ns = camera.camera_id() == "cam2" ? kFrameNs / 2 : 0;
+    EXPECT_EQ(camera.frames(), static_cast<uint64_t>(kFrames)) << camera.camera_id();
+    ASSERT_EQ(camera.intervals_size(), 1) << camera.camera_id();
+    EXPECT_EQ(camera.intervals(0).from_ns(), base_ns_ + kFrameNs + skew_ns) << camera.camera_id();
+    EXPECT_EQ(camera.intervals(0).to_ns(), base_ns_ + kFrames * kFrameNs + skew_ns) << camera.camera_id();
+  }
+  EXPECT_EQ(all.cameras(0).camera_id(), "cam1");
+
+  v1::RecordedSpansRequest one;
+  one.add_camera_ids("cam2");
+  v1::RecordedSpansResponse cam2;
+  ASSERT_TRUE(spans(one, cam2).ok());
+  ASSERT_EQ(cam2.cameras_size(), 1);
+  EXPECT_EQ(cam2.cameras(0).camera_id(), "cam2");
+
+  v1::RecordedSpansResponse refused;
+  EXPECT_EQ(spans({}, refused, kSensor).error_code(), grpc::StatusCode::PERMISSION_DENIED);
+  v1::RecordedSpansRequest bad;
+  bad.add_camera_ids("cam 1");
+  grpc::Status bad_id = spans(bad, refused);
+  EXPECT_EQ(bad_id.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_THAT(bad_id.error_message(), HasSubstr("'cam 1' is not a camera id"));
+}
+
+// Acked vs stored: an ack says which of the stream's frames are on disk and indexed. A new stream
+// starts at 0 (the fixture's earlier frames are another stream's); once the recorder has drained,
+// the next ack names the frame before it, and that frame is in the index.
+TEST_F(ReplayServiceTest, AcksSayUpToWhichSequenceTheStreamIsRecorded) {
+  auto sensor = v1::SensorService::NewStub(channel_);
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  auto stream = sensor->Stream(&context);
+  v1::SensorMessage m;
+  m.mutable_hello()->set_camera_id("cam1");
+  m.mutable_hello()->set_token(kSensor);
+  *m.mutable_hello()->mutable_intrinsics() = ToProto(PinholeIntrinsics::FromFov(64, 48, 60));
+  ASSERT_TRUE(stream->Write(m));
+  auto send = [&](int k) {
+    v1::SensorFrame& f = *m.mutable_frame();
+    f.set_sequence(k);
+    f.set_capture_time_ns(NowNs());
+    *f.mutable_pose() = ToProto(LookAt({0, 0, 10}, {10, 0, 0}));
+    f.set_jpeg(FrameJpeg(k));
+    v1::SensorAck ack;
+    EXPECT_TRUE(stream->Write(m));
+    EXPECT_TRUE(stream->Read(&ack));
+    EXPECT_EQ(ack.sequence(), static_cast<uint64_t>(k));
+    return ack.recorded_sequence();
+  };
+  const uint64_t first = send(kFrames + 1);
+  EXPECT_TRUE(first == 0 || first == kFrames + 1u) << first;  // never the fixture's stream's frame 20
+  // Frame 21 is committed; 22, just accepted, may be too if a flush falls between its acceptance
+  // and its ack.
+  server_->DrainRecorder();
+  EXPECT_THAT(send(kFrames + 2), ::testing::AnyOf(kFrames + 1u, kFrames + 2u));
+  server_->DrainRecorder();
+  EXPECT_THAT(send(kFrames + 3), ::testing::AnyOf(kFrames + 2u, kFrames + 3u));
+  stream->WritesDone();
+  EXPECT_TRUE(stream->Finish().ok());
+  auto index = record::RecordIndex::Open(server_.store_path());
+  ASSERT_TRUE(index.ok());
+  auto rows = (*index)->Frames({"cam1"}, 0, std::numeric_limits<int64_t>::max(), 1000);
+  ASSERT_TRUE(rows.ok());
+  for (const uint64_t k : {kFrames + 1u, kFrames + 2u}) {
+    EXPECT_TRUE(std::any_of(rows->begin(), rows->end(), [&](const record::FrameRow& r) { return r.sequence == k; })) << k;
+  }
 }
 
 TEST_F(ReplayServiceTest, ExportWritesEveryRecordedFrameOfTheCameraAsMotionJpegAndIsAudited) {
