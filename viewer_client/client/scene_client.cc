@@ -1,6 +1,9 @@
 #include "viewer_client/client/scene_client.h"
 
+#include <algorithm>
 #include <limits>
+#include <optional>
+#include <utility>
 
 #include <grpcpp/grpcpp.h>
 #include <opencv2/core.hpp>
@@ -137,6 +140,45 @@ absl::StatusOr<TriangleMesh> SceneClient::FetchStaticModel(uint64_t* version) {
   mesh.triangle_material.assign(mesh.TriangleCount(), SurfaceMaterial::kTerrain);
   mesh.triangle_object.assign(mesh.TriangleCount(), -1);
   return mesh;
+}
+
+ReplaySeek PlanSeek(int64_t seek_ns, int64_t now_ns, const RecordedSpans& spans, int64_t live_margin_ns) {
+  if (seek_ns >= now_ns - live_margin_ns) return {};
+  // The earliest recorded instant at or after seek_ns over every camera.
+  std::optional<int64_t> start_ns;
+  for (const RecordedCameraSpans& camera : spans.cameras) {
+    for (const auto& [from_ns, to_ns] : camera.intervals_ns) {
+      if (to_ns < seek_ns) continue;
+      const int64_t t = std::max(from_ns, seek_ns);
+      if (!start_ns || t < *start_ns) start_ns = t;
+    }
+  }
+  if (!start_ns || *start_ns >= now_ns - live_margin_ns) return {};
+  return {.live = false, .from_ns = *start_ns, .to_ns = now_ns};
+}
+
+absl::StatusOr<RecordedSpans> SceneClient::FetchRecordedSpans(const std::vector<std::string>& camera_ids) {
+  auto stub = v1::SceneService::NewStub(channel_);
+  grpc::ClientContext context;
+  context.AddMetadata("authorization", "Bearer " + token_);
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  v1::RecordedSpansRequest request;
+  for (const std::string& id : camera_ids) request.add_camera_ids(id);
+  v1::RecordedSpansResponse response;
+  const grpc::Status status = stub->RecordedSpans(&context, request, &response);
+  if (!status.ok()) {
+    return absl::Status(static_cast<absl::StatusCode>(status.error_code()),
+                        "recorded spans: " + status.error_message());
+  }
+  RecordedSpans out;
+  out.server_time_ns = response.server_time_ns();
+  for (const v1::RecordedCamera& camera : response.cameras()) {
+    RecordedCameraSpans& c = out.cameras.emplace_back();
+    c.camera_id = camera.camera_id();
+    c.frames = camera.frames();
+    for (const v1::RecordedInterval& i : camera.intervals()) c.intervals_ns.emplace_back(i.from_ns(), i.to_ns());
+  }
+  return out;
 }
 
 void SceneClient::Start(const SubscribeOptions& options) {

@@ -123,6 +123,27 @@ struct SubscribeOptions {
   bool replay() const { return replay_to_ns > replay_from_ns; }
 };
 
+// What the server has recorded (issue 18, SceneService.RecordedSpans): the panel's time line.
+struct RecordedCameraSpans {
+  std::string camera_id;
+  std::vector<std::pair<int64_t, int64_t>> intervals_ns;  // [first, last] capture time, oldest first
+  uint64_t frames = 0;
+};
+struct RecordedSpans {
+  std::vector<RecordedCameraSpans> cameras;
+  int64_t server_time_ns = 0;  // the server clock when it answered
+};
+
+// Where a seek on the time line goes (a pure function of the spans, so it is tested without a
+// window). Seeking at or after now - live_margin_ns is live. Inside a recorded interval (of any
+// camera) the replay starts there; in a gap or before the first recording, at the next recorded
+// instant; after the last one recorded, live. A replay runs to now_ns.
+struct ReplaySeek {
+  bool live = true;
+  int64_t from_ns = 0, to_ns = 0;
+};
+ReplaySeek PlanSeek(int64_t seek_ns, int64_t now_ns, const RecordedSpans& spans, int64_t live_margin_ns = 1'000'000'000);
+
 // The JPEG scale divisor (1, 2, 4 or 8) that keeps a frame_width x frame_height frame at least
 // need_width x need_height; 1 when either need is 0 or the frame size is unknown.
 int JpegReduction(int frame_width, int frame_height, int need_width, int need_height);
@@ -137,6 +158,10 @@ class SceneClient {
 
   // The newest static model (all chunks merged), with its version.
   absl::StatusOr<TriangleMesh> FetchStaticModel(uint64_t* version = nullptr);
+
+  // Each camera's recorded intervals (all cameras when `camera_ids` is empty); the server must
+  // record. Segments closer than 2 s are one interval.
+  absl::StatusOr<RecordedSpans> FetchRecordedSpans(const std::vector<std::string>& camera_ids = {});
 
   // Starts the subscription thread; Stop() ends it.
   void Start(const SubscribeOptions& options);

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <future>
 #include <limits>
 #include <map>
 #include <set>
@@ -21,6 +22,7 @@
 #include "model_store/common/cpu_clock.h"
 #include "model_store/common/log.h"
 #include "model_store/geometry/bvh.h"
+#include "viewer_client/client/replay_video.h"
 #include "model_store/geometry/camera.h"
 #include "viewer_client/client/browse_camera.h"
 #include "viewer_client/client/overlay.h"
@@ -48,9 +50,13 @@ std::string ViewerOptions::Check() const {
   if (width < 64 || height < 64 || width > 8192 || height > 8192) return "size must be 64..8192 pixels per side";
   if (layout != "quad" && layout != "browse") return "layout must be 'quad' or 'browse'";
   if (locked_cameras.size() > 3) return "at most 3 locked cameras";
-  if (headless && snapshot_path.empty() && record_dir.empty() && depth_path.empty()) {
-    return "headless needs --snapshot, --record or --depth";
+  if (headless && snapshot_path.empty() && record_dir.empty() && depth_path.empty() && video_path.empty()) {
+    return "headless needs --snapshot, --record, --depth or --video";
   }
+  if (!video_path.empty() && (!headless || replay_to_ns <= replay_from_ns)) {
+    return "--video needs --headless and --replay-from / --replay-to";
+  }
+  if (!video_path.empty() && !(video_fps >= 1 && video_fps <= 120)) return "--video-fps must be 1 .. 120";
   if (!depth_path.empty() && !headless && snapshot_path.empty()) return "--depth needs --headless or --snapshot";
   if (!(timeout_s > 0)) return "timeout must be > 0";
   if (!(max_rate_hz > 0)) return "max rate must be > 0";
@@ -224,7 +230,8 @@ class Session {
                   .replay_from_ns = options_.replay_from_ns, .replay_to_ns = options_.replay_to_ns,
                   .replay_rate = options_.replay_rate};
     for (auto& c : clients_) c->Start(subscribe_);
-    if (subscribe_.replay()) state_.replay_status = "replay";
+    replaying_ = subscribe_.replay();
+    if (replaying_) state_.replay_status = "replay";
     return absl::OkStatus();
   }
 
@@ -303,38 +310,76 @@ class Session {
 
   // Draws one frame into the context's framebuffer; returns the views drawn. `saved`: the frame
   // goes to a PNG, so the overlay is redrawn if its content changed (no 4 Hz lag in pictures).
-  // The panel's replay controls (issue 18): the clients re-subscribe as a replay from the chosen
-  // time (or where a pause left it), stop where they are, or go back to the start-up subscription.
+  // The panel's replay controls (issue 18): the clients re-subscribe as a replay from the time
+  // dragged to on the time line (or where a pause left it, or replay_back_s before now), stop where
+  // they are, change rate from where they are, or go back to the start-up subscription.
   void ApplyReplay() {
     using Command = OverlayState::ReplayCommand;
+    PollRecordedSpans();
     const Command command = std::exchange(state_.replay_command, Command::kNone);
     SceneClient& first = *clients_[0];
+    const int64_t now_ns = NowNs();
+    state_.timeline_now_ns = now_ns;
+    if (replaying_ && first.replay_time_ns() > 0) state_.replay_time_ns = first.replay_time_ns();
     if (command == Command::kNone) {
       if (replaying_ && !paused_) {
         state_.replay_status = first.replay_ended()
                                    ? (first.last_error().empty() ? std::string("replay ended") : first.last_error())
-                                   : absl::StrFormat("%.0f s ago", (NowNs() - first.replay_time_ns()) * 1e-9);
+                                   : absl::StrFormat("%.0f s ago, %gx", (now_ns - first.replay_time_ns()) * 1e-9,
+                                                     state_.replay_rate);
       }
       return;
     }
     if (command == Command::kPause) {
+      if (!replaying_) return;  // live cannot pause: nothing would say where it stopped
       for (auto& c : clients_) c->Stop();
       paused_ = true;
       state_.replay_status = "paused";
       return;
     }
+    if (command == Command::kRate && (!replaying_ || paused_)) return;  // the next play takes it
+    ReplaySeek seek;  // live unless set below
+    if (command == Command::kSeek) {
+      seek = PlanSeek(state_.replay_seek_ns, now_ns, state_.recorded);
+    } else if (command == Command::kPlay || command == Command::kRate) {
+      const bool resume = replaying_ && first.replay_time_ns() > 0 && !first.replay_ended();
+      seek = {.live = false,
+              .from_ns = resume ? first.replay_time_ns() : now_ns - static_cast<int64_t>(state_.replay_back_s * 1e9),
+              .to_ns = now_ns};
+    }
     SubscribeOptions o = subscribe_;
-    replaying_ = command == Command::kPlay;
+    replaying_ = !seek.live;
     if (replaying_) {
-      const int64_t now_ns = NowNs();
-      const bool resume = paused_ && first.replay_time_ns() > 0 && !first.replay_ended();
-      o.replay_from_ns = resume ? first.replay_time_ns() : now_ns - static_cast<int64_t>(state_.replay_back_s * 1e9);
-      o.replay_to_ns = now_ns;
+      o.replay_from_ns = seek.from_ns;
+      o.replay_to_ns = seek.to_ns;
       o.replay_rate = state_.replay_rate;
+    } else {
+      o.replay_from_ns = o.replay_to_ns = 0;  // live even when started with --replay-*
     }
     paused_ = false;
+    state_.replay_time_ns = replaying_ ? seek.from_ns : 0;
     for (auto& c : clients_) c->Start(o);
     state_.replay_status = replaying_ ? "seeking" : "live";
+  }
+
+  // The time line's spans, asked of the first server every 2 s off the render thread; a server
+  // that does not record is asked no more.
+  void PollRecordedSpans() {
+    if (spans_future_.valid()) {
+      if (spans_future_.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return;
+      absl::StatusOr<RecordedSpans> spans = spans_future_.get();
+      if (spans.ok()) {
+        state_.recorded = *std::move(spans);
+      } else if (spans.status().code() == absl::StatusCode::kFailedPrecondition) {
+        spans_off_ = true;
+        state_.replay_status = std::string(spans.status().message());
+      }
+    }
+    const auto now = std::chrono::steady_clock::now();
+    if (spans_off_ || now < next_spans_) return;
+    next_spans_ = now + std::chrono::seconds(2);
+    SceneClient* client = clients_[0].get();
+    spans_future_ = std::async(std::launch::async, [client] { return client->FetchRecordedSpans(); });
   }
 
   absl::StatusOr<std::vector<View>> Draw(const WindowInput* input, bool saved = false) {
@@ -522,6 +567,11 @@ class Session {
   bool auto_locked_ = false;
   std::optional<DisplayOptions> applied_display_;
   std::vector<std::unique_ptr<SceneClient>> clients_;
+  // The time line's RecordedSpans call in flight (declared after clients_: destroyed first, it
+  // waits for the call that uses clients_[0]).
+  std::future<absl::StatusOr<RecordedSpans>> spans_future_;
+  std::chrono::steady_clock::time_point next_spans_{};
+  bool spans_off_ = false;
   std::vector<Projector> projectors_;
   std::vector<View> last_views_;  // the previous frame's, for the overlay cache
   std::vector<std::pair<std::string, uint64_t>> point_serials_;  // the LiDAR clouds in the renderer
@@ -603,8 +653,20 @@ absl::Status RunViewer(const ViewerOptions& options) {
   Session session(options, *context, **renderer, overlay.get());
   if (absl::Status s = session.Connect(); !s.ok()) return s;
 
+  std::unique_ptr<ReplayVideo> video;
+  if (!options.video_path.empty()) {
+    auto v = ReplayVideo::Open(options.video_path, context->framebuffer_width(), context->framebuffer_height(),
+                               options.video_fps, options.replay_from_ns, options.replay_to_ns);
+    if (!v.ok()) return absl::Status(v.status().code(), absl::StrCat("viewer: ", v.status().message()));
+    video = *std::move(v);
+  }
   int recorded = 0;
   auto after_frame = [&]() -> absl::Status {
+    if (video) {
+      absl::StatusOr<std::vector<uint8_t>> pixels = context->ReadPixels();
+      if (!pixels.ok()) return pixels.status();
+      if (absl::Status s = video->Add(*pixels, session.client(0).replay_time_ns()); !s.ok()) return s;
+    }
     if (options.record_dir.empty()) return absl::OkStatus();
     return SaveFramebuffer(*context, RecordPath(options.record_dir, recorded++));
   };
@@ -657,7 +719,8 @@ absl::Status RunViewer(const ViewerOptions& options) {
       }
       const auto frame_start = std::chrono::steady_clock::now();
       const bool last = f + 1 == frames || (replay && session.client(0).replay_ended());
-      absl::StatusOr<std::vector<View>> drawn = session.Draw(nullptr, last || !options.record_dir.empty());
+      absl::StatusOr<std::vector<View>> drawn =
+          session.Draw(nullptr, last || !options.record_dir.empty() || !options.video_path.empty());
       if (!drawn.ok()) return drawn.status();
       views = *std::move(drawn);
       (void)context->ReadPixels();  // waits for the GPU, so the time is the frame's
@@ -679,6 +742,12 @@ absl::Status RunViewer(const ViewerOptions& options) {
                     << " hits, " << (*renderer)->stats().view_cache_shadow_tests << " shadow-tested, "
                     << (*renderer)->stats().views_uncached << " uncached views ("
                     << (*renderer)->stats().views_static_from_cache << " with the cached static G-buffer)";
+    }
+    if (video) {
+      absl::StatusOr<int64_t> frames = video->Finish();
+      if (!frames.ok()) return frames.status();
+      AVE_LOG(INFO) << "viewer: wrote " << options.video_path << " (" << *frames << " frames at " << options.video_fps
+                    << " per recorded second)";
     }
     if (!options.snapshot_path.empty()) {
       if (absl::Status s = SaveFramebuffer(*context, options.snapshot_path); !s.ok()) return s;

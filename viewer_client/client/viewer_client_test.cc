@@ -68,6 +68,28 @@ TEST(BrowseCamera, MouseLookTurnsWithoutMovingAndWheelApproachesThePivot) {
   EXPECT_NEAR((zoom.pivot() - zoom.eye()).norm(), 1, 1e-9);
 }
 
+// The time line's seek (issue 18): inside a recorded interval of any camera it starts there, in a
+// gap at the next recorded instant, near now or after everything recorded it is live.
+TEST(PlanSeek, StartsInsideRecordingSkipsGapsAndGoesLiveNearNowOrPastTheRecording) {
+  RecordedSpans spans;
+  spans.cameras.push_back({"cam1", {{100, 200}, {500, 600}}, 10});
+  spans.cameras.push_back({"cam2", {{300, 350}}, 3});
+  constexpr int64_t kNow = 1000, kMargin = 50;
+  auto seek = [&](int64_t t) { return PlanSeek(t, kNow, spans, kMargin); };
+  EXPECT_FALSE(seek(150).live);
+  EXPECT_EQ(seek(150).from_ns, 150);  // inside cam1's first interval
+  EXPECT_EQ(seek(150).to_ns, kNow);
+  EXPECT_EQ(seek(0).from_ns, 100);    // before everything: the first frame
+  EXPECT_EQ(seek(250).from_ns, 300);  // cam1's gap: cam2's interval comes first
+  EXPECT_EQ(seek(340).from_ns, 340);  // inside cam2's only
+  EXPECT_EQ(seek(400).from_ns, 500);  // a gap of both
+  EXPECT_EQ(seek(600).from_ns, 600);  // the last instant recorded
+  EXPECT_TRUE(seek(700).live);        // after everything recorded
+  EXPECT_TRUE(seek(960).live);        // within the margin of now
+  EXPECT_TRUE(PlanSeek(150, kNow, {}, kMargin).live);  // nothing recorded
+  EXPECT_TRUE(PlanSeek(500, 520, spans, kMargin).live);  // the next recorded instant is too near now
+}
+
 TEST(Overlay, ProjectAndPickAndRayAgree) {
   const View view = BrowseView({100, 50, 640, 480}, {0, -80, 60}, {0, 0, 0}, 60);
   const int fb_h = 720;
