@@ -73,6 +73,9 @@ int main(int argc, char** argv) {
                  "seconds before now (-60: a minute ago)");
   app.add_option("--replay-to", replay_to_s, "replay until this time (same forms; 0 = now)");
   app.add_option("--replay-rate", options.replay_rate, "replay speed, 0.25 .. 16")->capture_default_str();
+  app.add_option("--video", options.video_path,
+                 "headless replay: also write the frames drawn as a Motion-JPEG .mkv or .avi at the recorded timing");
+  app.add_option("--video-fps", options.video_fps, "--video frames per recorded second")->capture_default_str();
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-viewer")) return *exit_code;
   if (replay_from_s.has_value() != replay_to_s.has_value()) {
     std::cerr << "ave-viewer: --replay-from and --replay-to go together\n";

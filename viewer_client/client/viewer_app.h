@@ -46,6 +46,10 @@ struct ViewerOptions {
   // epoch) at replay_rate instead of the live scene; headless, frames are drawn until it ends.
   int64_t replay_from_ns = 0, replay_to_ns = 0;
   float replay_rate = 1;
+  // Headless replay: the frames drawn also as a Motion-JPEG video (.mkv or .avi) at the recorded
+  // timing, video_fps frames per recorded second (replay_video.h).
+  std::string video_path;
+  double video_fps = 10;
 
   std::string Check() const;
 };
