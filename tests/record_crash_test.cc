@@ -3,7 +3,8 @@
 // each kill the index and the segment files agree: every indexed frame lies inside its segment and
 // decodes as a JPEG of the declared size, PRAGMA integrity_check is clean; after each restart the
 // unindexed tails are cut (every segment file is exactly as long as its indexed bytes) and
-// recording goes on. AVE_RECORD_CRASH_KILLS gives the full form (10 kills).
+// recording goes on; the newest frame each agent's acks called recorded (SensorAck.recorded_sequence)
+// before a kill is in the index. AVE_RECORD_CRASH_KILLS gives the full form (10 kills).
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <signal.h>
@@ -11,7 +12,9 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdlib>
+#include <limits>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -141,6 +144,27 @@ int64_t CheckIndexAgainstSegments(const fs::path& dir, bool tails_cut) {
   return static_cast<int64_t>(rows->size());
 }
 
+// For each agent whose acks said a frame was recorded (SensorAck.recorded_sequence), whether the
+// index holds that frame; the number of agents checked.
+int CheckAckedRecordedFramesIndexed(const fs::path& dir, const std::vector<Agent>& agents, int kill) {
+  auto index = record::RecordIndex::Open((dir / "ave.db").string());
+  EXPECT_TRUE(index.ok()) << index.status();
+  if (!index.ok()) return 0;
+  int checked = 0;
+  for (size_t i = 0; i < agents.size(); ++i) {
+    const uint64_t recorded = agents[i].streamer->stats().recorded_sequence;
+    if (recorded == 0) continue;
+    const std::string id = "cam" + std::to_string(i);
+    auto rows = (*index)->Frames({id}, 0, std::numeric_limits<int64_t>::max(), 1 << 20);
+    EXPECT_TRUE(rows.ok()) << rows.status();
+    if (!rows.ok()) continue;
+    EXPECT_TRUE(std::any_of(rows->begin(), rows->end(), [&](const record::FrameRow& r) { return r.sequence == recorded; }))
+        << id << ": frame " << recorded << " was acked as recorded before kill " << kill << " but is not indexed";
+    ++checked;
+  }
+  return checked;
+}
+
 TEST(RecordCrash, KillNineWhileRecordingLeavesIndexAndSegmentsInAgreement) {
   log::MinLevel() = log::Level::kERROR;
   const fs::path dir = fs::temp_directory_path() / ("ave_record_crash_test_" + std::to_string(::getpid()));
@@ -180,6 +204,7 @@ TEST(RecordCrash, KillNineWhileRecordingLeavesIndexAndSegmentsInAgreement) {
     return now_indexed;
   };
   int64_t indexed = 0;
+  int acked_recorded = 0;
   for (int kill = 0; kill < kKills; ++kill) {
     // Kill at a time unrelated to the recorder's commit rhythm, once this run has recorded.
     const int64_t now_indexed = wait_indexed(indexed + kCameras);
@@ -188,11 +213,15 @@ TEST(RecordCrash, KillNineWhileRecordingLeavesIndexAndSegmentsInAgreement) {
     server.Kill(SIGKILL);
     const int64_t after_kill = CheckIndexAgainstSegments(dir, false);
     EXPECT_GE(after_kill, now_indexed) << "a committed row vanished in kill " << kill;
+    // Acked as recorded means stored: the newest SensorAck.recorded_sequence each agent received
+    // before the kill names a frame the index still holds.
+    acked_recorded += CheckAckedRecordedFramesIndexed(dir, agents, kill);
     server.Start();
     ASSERT_TRUE(server.WaitServing(std::chrono::seconds(20))) << "server did not come back after kill " << kill;
     CheckIndexAgainstSegments(dir, true);
     indexed = after_kill;
   }
+  EXPECT_GT(acked_recorded, 0) << "no ack ever said a frame was recorded";
   const int64_t running = wait_indexed(indexed + kCameras);
   EXPECT_GT(running, indexed + kCameras) << "recording did not go on after the last restart";
   for (auto& a : agents) a.stop = true;
@@ -210,7 +239,8 @@ TEST(RecordCrash, KillNineWhileRecordingLeavesIndexAndSegmentsInAgreement) {
     orphans += std::atoi(line.substr(at + 18).c_str());
   }
   std::cout << "record crash: " << kKills << " kills, " << final_indexed << " frames indexed, " << tails
-            << " segment tails truncated and " << orphans << " unindexed segment files removed at restarts\n";
+            << " segment tails truncated and " << orphans << " unindexed segment files removed at restarts; "
+            << acked_recorded << " agents' last frame acked as recorded before a kill, all indexed\n";
   fs::remove_all(dir);
 }
 
