@@ -316,11 +316,15 @@ class Session {
   void ApplyReplay() {
     using Command = OverlayState::ReplayCommand;
     PollRecordedSpans();
-    const Command command = std::exchange(state_.replay_command, Command::kNone);
+    Command command = std::exchange(state_.replay_command, Command::kNone);
     SceneClient& first = *clients_[0];
     const int64_t now_ns = NowNs();
     state_.timeline_now_ns = now_ns;
     if (replaying_ && first.replay_time_ns() > 0) state_.replay_time_ns = first.replay_time_ns();
+    if (command == Command::kNone && replaying_ && !paused_ && panel_replay_ && first.replay_ended() &&
+        first.last_error().empty()) {
+      command = Command::kLive;  // a panel replay runs to the time it was asked at: it caught up
+    }
     if (command == Command::kNone) {
       if (replaying_ && !paused_) {
         state_.replay_status = first.replay_ended()
@@ -357,6 +361,7 @@ class Session {
       o.replay_from_ns = o.replay_to_ns = 0;  // live even when started with --replay-*
     }
     paused_ = false;
+    panel_replay_ = replaying_;
     state_.replay_time_ns = replaying_ ? seek.from_ns : 0;
     for (auto& c : clients_) c->Start(o);
     state_.replay_status = replaying_ ? "seeking" : "live";
@@ -564,6 +569,7 @@ class Session {
   OverlayState state_;
   SubscribeOptions subscribe_;  // the start-up subscription (live, or the --replay-* one)
   bool replaying_ = false, paused_ = false;  // the panel's replay (issue 18)
+  bool panel_replay_ = false;  // started from the panel (to the time asked): live once it ends
   bool auto_locked_ = false;
   std::optional<DisplayOptions> applied_display_;
   std::vector<std::unique_ptr<SceneClient>> clients_;
