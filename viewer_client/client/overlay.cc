@@ -358,6 +358,7 @@ void ReplaySection(OverlayState& state) {
   const int64_t shown_ns = state.replay_time_ns > 0 ? state.replay_time_ns : right_ns;
   dl->AddLine(ImVec2(x_of(shown_ns), p0.y), ImVec2(x_of(shown_ns), p0.y + size.y),
               state.replay_time_ns > 0 ? IM_COL32(250, 210, 40, 255) : IM_COL32(235, 60, 50, 255), 2);
+  state.timeline_rect_px = {p0.x, p0.y, size.x, size.y};
   ImGui::InvisibleButton("timeline", size);
   auto time_at = [&](float x) {
     return left_ns + static_cast<int64_t>(std::clamp((x - p0.x) / size.x, 0.f, 1.f) * span_ns);
@@ -477,6 +478,10 @@ void Overlay::Panel(const std::vector<CameraView>& cameras, const OverlayStats& 
       ImGui::Text("%s (LiDAR, %s): %zu people, %zu points", lidar.id.c_str(), StatusName(lidar.status),
                   lidar.tracks.size(), lidar.points ? lidar.points->p_local.size() : size_t{0});
     }
+  }
+  if (state.open_replay) {
+    ImGui::SetNextItemOpen(true);
+    state.open_replay = false;
   }
   if (ImGui::CollapsingHeader("Replay")) ReplaySection(state);
   ImGui::Text("subscriptions: %llu  servers: %d", static_cast<unsigned long long>(stats.subscriptions), stats.servers);

@@ -49,6 +49,8 @@ struct OverlayState {
   int64_t timeline_now_ns = 0;  // the time line's right end (the viewer's clock)
   int64_t replay_time_ns = 0;
   int timeline_zoom = 1;  // index of the shown span: 1 min, 10 min, 1 h, everything recorded
+  bool open_replay = false;  // set: the Replay section opens on the next panel (then cleared)
+  std::array<float, 4> timeline_rect_px{};  // where the time line was last drawn: x, y, width, height
 };
 
 // Figures the panel shows.

@@ -165,6 +165,48 @@ TEST(Overlay, PanelAndLabelsAppearHeadless) {
   EXPECT_EQ(differs(kW - 60, kH - 40, kW, kH), 0) << "the overlay drew where nothing belongs";
 }
 
+// Issue 18: the panel's time line, drawn headless over the last minute (1 min zoom) of two cameras'
+// recordings; a press at three quarters of its width and a release there is a seek to 45 s after
+// its left end, at most a pixel's worth of time off (and nothing before the release).
+TEST(Overlay, DragOnTheTimeLineSeeksToTheTimeUnderTheCursor) {
+  constexpr int kW = 800, kH = 600;
+  auto context = CreateHeadlessContext(kW, kH);
+  ASSERT_TRUE(context.ok()) << context.status();
+  ASSERT_TRUE((*context)->MakeCurrent().ok());
+  auto overlay = Overlay::Create();
+  ASSERT_TRUE(overlay.ok()) << overlay.status();
+  OverlayState state;
+  state.open_replay = true;
+  state.timeline_zoom = 0;  // 1 min
+  state.timeline_now_ns = 100'000'000'000;
+  state.recorded.cameras.push_back({"camA", {{50'000'000'000, 70'000'000'000}, {80'000'000'000, 99'000'000'000}}, 100});
+  state.recorded.cameras.push_back({"camB", {{45'000'000'000, 99'500'000'000}}, 200});
+  auto frame = [&](const WindowInput* input) {
+    (*context)->BindFramebuffer();
+    (*overlay)->BeginFrame(kW, kH, input, 1.0 / 30);
+    (*overlay)->Panel({}, {}, 0, state);
+    (*overlay)->EndFrame();
+  };
+  frame(nullptr);
+  frame(nullptr);  // the auto-sized panel has its size
+  const auto [x, y, w, h] = state.timeline_rect_px;
+  ASSERT_GT(w, 100.f);
+  ASSERT_GT(h, 4.f);
+  EXPECT_EQ(state.replay_command, OverlayState::ReplayCommand::kNone);
+  WindowInput press;
+  press.cursor_px = Eigen::Vector2d(x + 0.75 * w, y + h / 2);
+  press.left_down = true;
+  press.left_presses = 1;
+  frame(&press);
+  EXPECT_EQ(state.replay_command, OverlayState::ReplayCommand::kNone) << "a seek before the release";
+  WindowInput release;
+  release.cursor_px = press.cursor_px;
+  frame(&release);
+  ASSERT_EQ(state.replay_command, OverlayState::ReplayCommand::kSeek);
+  const double pixel_ns = 60e9 / w;
+  EXPECT_NEAR(static_cast<double>(state.replay_seek_ns), 85e9, 1.5 * pixel_ns);
+}
+
 // Issue 7 performance: the overlay is redrawn into its cache only when its triangles changed, and
 // then at once on input or moving views, otherwise at most at content_refresh_hz; a cached frame
 // composites the same pixels.
