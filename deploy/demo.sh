@@ -7,7 +7,8 @@
 # client certificates (mutual TLS) and each streams with its own camera-bound token issued through
 # the admin API (the server keeps only the tokens' SHA-256).
 #   sudo deploy/demo.sh                 (AVE_SKIP_DEPS=1 skips the package check)
-# Output: ${AVE_DEMO_OUT:-build/demo}/quad.png, server.log, agent-*.log, ave.db, certs/, model.json
+# Output: ${AVE_DEMO_OUT:-build/demo}/quad.png, server.log, agent-*.log, ave.db, certs/, model.json,
+# rec/ (the recording, issue 18: replay it with SceneService.Replay)
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 build=${AVE_BUILD_DIR:-$root/build}
@@ -17,6 +18,7 @@ out=${AVE_DEMO_OUT:-$build/demo}
 bin=$build/bin
 mkdir -p "$out"
 rm -f "$out"/ave.db* "$out"/*.log "$out"/quad.png
+rm -rf "$out"/rec
 
 token() { head -c 16 /dev/urandom | od -An -tx1 | tr -d ' \n'; }
 export AVE_SENSOR_TOKEN=${AVE_SENSOR_TOKEN:-$(token)}
@@ -57,7 +59,7 @@ fi
 echo "demo: starting ave-server (store $out/ave.db)"
 "$bin/ave-server" --listen 127.0.0.1:0 --store "$out/ave.db" \
   --tls-cert "$certs/server.pem" --tls-key "$certs/server.key" --tls-client-ca "$certs/ca.pem" --sensor-client-cert \
-  --metrics-listen 127.0.0.1:0 >"$out/server.out" 2>"$out/server.log" &
+  --metrics-listen 127.0.0.1:0 --record-dir "$out/rec" --retention 1d >"$out/server.out" 2>"$out/server.log" &
 server_pid=$!
 pids+=("$server_pid")
 port=""

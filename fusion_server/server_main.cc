@@ -1,7 +1,11 @@
 // ave-server: the fusion server. Thin main over fusion_server/service.
+#include <cctype>
+#include <cmath>
 #include <csignal>
 #include <cstdlib>
 #include <iostream>
+#include <map>
+#include <optional>
 #include <thread>
 
 
@@ -63,6 +67,14 @@ int main(int argc, char** argv) {
   app.add_option("--campus-grid", options.campus_grid_m, "terrain grid (m) when seeding the built-in campus")
       ->capture_default_str();
   app.add_flag("!--no-seed-campus", options.seed_campus, "do not store the built-in campus in an empty store");
+  std::string retention = "0", record_max = "0";
+  app.add_option("--record-dir", options.record_dir,
+                 "record every accepted frame (JPEG segments here, index in --store) for replay; empty = off");
+  app.add_option("--retention", retention, "delete recordings older than this: 90s, 30m, 12h, 7d (0 = keep)")
+      ->capture_default_str();
+  app.add_option("--record-max-bytes", record_max,
+                 "recording budget: oldest segments are deleted beyond it, recording stops when it cannot be kept "
+                 "(bytes, or with K/M/G/T; 0 = the disk)")->capture_default_str();
   app.add_option("--log-level", log_level, "debug, info, warning or error")->check(CLI::IsMember({"debug", "info", "warning", "error"}));
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-server")) return *exit_code;
   ave::log::MinLevel() = log_level == "debug" ? ave::log::Level::kDEBUG
@@ -71,6 +83,33 @@ int main(int argc, char** argv) {
                                                   : ave::log::Level::kINFO;
   options.frame_limits.max_jpeg_bytes = static_cast<size_t>(max_frame_mb * (1 << 20));
   options.auth_limit.window_ns = static_cast<int64_t>(auth_window_s * 1e9);
+  // "<number><unit>" with the unit's multiplier, or nullopt.
+  auto scaled = [](const std::string& text, const std::map<char, double>& units) -> std::optional<double> {
+    if (text.empty()) return std::nullopt;
+    double scale = 1;
+    std::string number = text;
+    if (auto it = units.find(static_cast<char>(std::tolower(text.back()))); it != units.end()) {
+      scale = it->second;
+      number.pop_back();
+    }
+    char* end = nullptr;
+    const double value = std::strtod(number.c_str(), &end);
+    if (number.empty() || end != number.c_str() + number.size() || !std::isfinite(value) || value < 0) return std::nullopt;
+    return value * scale;
+  };
+  const std::optional<double> retention_s = scaled(retention, {{'s', 1}, {'m', 60}, {'h', 3600}, {'d', 86400}});
+  if (!retention_s) {
+    std::cerr << "ave-server: --retention '" << retention << "': expected a duration such as 90s, 30m, 12h or 7d\n";
+    return 1;
+  }
+  options.record_retention = std::chrono::seconds(static_cast<int64_t>(*retention_s));
+  const std::optional<double> max_bytes =
+      scaled(record_max, {{'k', 1024.0}, {'m', 1048576.0}, {'g', 1073741824.0}, {'t', 1099511627776.0}});
+  if (!max_bytes) {
+    std::cerr << "ave-server: --record-max-bytes '" << record_max << "': expected bytes such as 500000000 or 20G\n";
+    return 1;
+  }
+  options.record_max_bytes = static_cast<int64_t>(*max_bytes);
 
   // Signals are taken by a waiting thread, so shutdown runs outside any signal handler.
   sigset_t signals;

@@ -2,9 +2,11 @@
 // offscreen (EGL) to a PNG / a PNG sequence / an OpenEXR depth image. Keys: see kKeys below.
 #include <cstdlib>
 #include <iostream>
+#include <optional>
 #include <sstream>
 
 #include "model_store/common/cli.h"
+#include "model_store/common/log.h"
 #include "viewer_client/client/viewer_app.h"
 
 namespace {
@@ -65,7 +67,26 @@ int main(int argc, char** argv) {
                "start with the LiDAR point layer off (key n; the server then sends no points)");
   app.add_flag("!--no-select", options.select_data,
                "ask for every camera's frames (default: only cameras whose frustum meets a view)");
+  std::optional<double> replay_from_s, replay_to_s;
+  app.add_option("--replay-from", replay_from_s,
+                 "replay the recording from this server time: seconds since the Unix epoch, or <= 0 for "
+                 "seconds before now (-60: a minute ago)");
+  app.add_option("--replay-to", replay_to_s, "replay until this time (same forms; 0 = now)");
+  app.add_option("--replay-rate", options.replay_rate, "replay speed, 0.25 .. 16")->capture_default_str();
+  app.add_option("--video", options.video_path,
+                 "headless replay: also write the frames drawn as a Motion-JPEG .mkv or .avi at the recorded timing");
+  app.add_option("--video-fps", options.video_fps, "--video frames per recorded second")->capture_default_str();
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-viewer")) return *exit_code;
+  if (replay_from_s.has_value() != replay_to_s.has_value()) {
+    std::cerr << "ave-viewer: --replay-from and --replay-to go together\n";
+    return 2;
+  }
+  if (replay_from_s) {
+    const double now_s = ave::NowNs() * 1e-9;
+    auto absolute_ns = [&](double s) { return static_cast<int64_t>((s <= 0 ? now_s + s : s) * 1e9); };
+    options.replay_from_ns = absolute_ns(*replay_from_s);
+    options.replay_to_ns = absolute_ns(*replay_to_s);
+  }
   if (!servers.empty()) options.servers = servers;
   if (!eye.empty() && !ave::cli::ParseVec3(eye, options.eye)) {
     std::cerr << "ave-viewer: --eye must be x,y,z\n";

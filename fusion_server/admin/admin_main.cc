@@ -8,7 +8,9 @@
 //   ave-admin import-campus            (registers the built-in campus cameras, skipping existing ones)
 //   ave-admin issue-token --role sensor --camera cam1   (prints the new token once)
 //   ave-admin revoke-token --id 3f2a9c01b7e4 | list-tokens
+//   ave-admin export --camera cam1 --from T --to T2 --out clip.mkv   (recorded frames, issue 18)
 // TLS: --tls-ca ca.pem (and --tls-cert/--tls-key for mutual TLS); env AVE_TLS_CA.
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <iostream>
@@ -19,6 +21,7 @@
 
 #include "ave/net/tls.h"
 #include "fusion_server/admin/admin_client.h"
+#include "fusion_server/admin/export.h"
 #include "fusion_server/core/convert.h"
 #include "model_store/common/cli.h"
 #include "model_store/scene/intrinsics_file.h"
@@ -61,6 +64,14 @@ int main(int argc, char** argv) {
   app.add_flag("--insecure-plaintext", tls.insecure_plaintext,
                "send the admin token in plaintext to a non-loopback server (without --tls-ca)");
   app.require_subcommand(1);
+  CLI::App* export_clip = app.add_subcommand("export", "write a camera's recorded frames between two times as a Motion-JPEG clip");
+  std::string export_camera, export_out;
+  double export_from_s = 0, export_to_s = 0;
+  export_clip->add_option("--camera", export_camera, "camera id")->required();
+  export_clip->add_option("--from", export_from_s, "start: server time in seconds since the Unix epoch, or <= 0 for seconds before now")
+      ->required();
+  export_clip->add_option("--to", export_to_s, "end, the same forms (0 = now)")->required();
+  export_clip->add_option("--out", export_out, "output clip, .mkv or .avi")->required();
 
   app.add_subcommand("list", "list registered cameras as JSON");
   std::string id, name, source, size = "640x480", position, look_at, quaternion;
@@ -116,6 +127,16 @@ int main(int argc, char** argv) {
   if (!channel.ok()) return Fail(std::string(channel.status().message()));
   ave::AdminClient client(*channel, token);
 
+  if (app.got_subcommand("export")) {
+    const double now_s = std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+    auto absolute_ns = [&](double s) { return static_cast<int64_t>((s <= 0 ? now_s + s : s) * 1e9); };
+    auto done = ave::ExportClip(*channel, token, {export_camera, absolute_ns(export_from_s), absolute_ns(export_to_s), export_out});
+    if (!done.ok()) return Fail(std::string(done.status().message()));
+    std::cout << "exported " << done->frames << " frames of " << export_camera << " (" << done->width << "x"
+              << done->height << ", " << done->fps << " fps) to " << export_out
+              << (done->gaps ? " (" + std::to_string(done->gaps) + " recorded frames unreadable)" : "") << "\n";
+    return 0;
+  }
   if (app.got_subcommand("issue-token")) {
     auto issued = client.IssueToken(role, id, label);
     if (!issued.ok()) return Fail(std::string(issued.status().message()));

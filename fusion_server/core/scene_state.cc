@@ -129,22 +129,25 @@ absl::Status SceneState::AcceptFrame(const std::string& id, std::shared_ptr<cons
       placed = PlaceFrameBoxes(*terrain, k, mounting_pose, *frame, id, session, t_ns);
     }
   }
-  std::lock_guard lock(mu_);
-  auto it = cameras_.find(id);
-  if (it == cameras_.end()) return absl::NotFoundError(absl::StrCat("camera '", id, "' is not registered"));
-  if (it->second.entry.kind != SensorKind::kCamera) {
-    return absl::FailedPreconditionError(absl::StrCat("sensor '", id, "' is registered as a rotating LiDAR, not a camera"));
+  {
+    std::lock_guard lock(mu_);
+    auto it = cameras_.find(id);
+    if (it == cameras_.end()) return absl::NotFoundError(absl::StrCat("camera '", id, "' is not registered"));
+    if (it->second.entry.kind != SensorKind::kCamera) {
+      return absl::FailedPreconditionError(absl::StrCat("sensor '", id, "' is registered as a rotating LiDAR, not a camera"));
+    }
+    if (frame->metadata_only()) {
+      ++it->second.metadata;
+      return absl::OkStatus();
+    }
+    ++it->second.accepted;
+    it->second.latest = frame;
+    it->second.latest_received_ns = received_ns;
+    for (const ObjectObservation& observation : placed) objects_.Observe(observation);
+    if (terrain) ExpireObjectsLocked(t_ns);
+    BumpLocked();
   }
-  if (frame->metadata_only()) {
-    ++it->second.metadata;
-    return absl::OkStatus();
-  }
-  ++it->second.accepted;
-  it->second.latest = std::move(frame);
-  it->second.latest_received_ns = received_ns;
-  for (const ObjectObservation& observation : placed) objects_.Observe(observation);
-  if (terrain) ExpireObjectsLocked(t_ns);
-  BumpLocked();
+  if (frame_observer_) frame_observer_(id, frame, received_ns, t_ns);
   return absl::OkStatus();
 }
 
@@ -219,24 +222,38 @@ absl::Status SceneState::AcceptLidarSweep(const std::string& id, std::shared_ptr
   for (const v1::FootTrack& track : sweep->tracks()) {
     observations.push_back(LidarObservation(terrain.get(), track, id, session, t_ns, world_from_sensor.translation));
   }
-  std::lock_guard lock(mu_);
-  auto it = cameras_.find(id);
-  if (absl::Status s = check(it == cameras_.end() ? nullptr : &it->second); !s.ok()) return s;
-  Live& live = it->second;
-  ++live.accepted;
-  live.latest_sweep = std::move(sweep);
-  live.latest_received_ns = received_ns;
-  live.sweep_session = session;
-  for (const ObjectObservation& observation : observations) objects_.Observe(observation);
-  ExpireObjectsLocked(t_ns);
-  BumpLocked();
+  {
+    std::lock_guard lock(mu_);
+    auto it = cameras_.find(id);
+    if (absl::Status s = check(it == cameras_.end() ? nullptr : &it->second); !s.ok()) return s;
+    Live& live = it->second;
+    ++live.accepted;
+    live.latest_sweep = sweep;
+    live.latest_received_ns = received_ns;
+    live.sweep_session = session;
+    for (const ObjectObservation& observation : observations) objects_.Observe(observation);
+    ExpireObjectsLocked(t_ns);
+    BumpLocked();
+  }
+  if (sweep_observer_) sweep_observer_(id, sweep, received_ns, t_ns);
   return absl::OkStatus();
 }
 
-void SceneState::SetStaticModel(const TriangleMesh& mesh) {
-  auto terrain = std::make_shared<const TerrainModel>(mesh);
+void SceneState::SetStaticModel(const TriangleMesh& mesh) { SetTerrain(std::make_shared<const TerrainModel>(mesh)); }
+
+void SceneState::SetTerrain(std::shared_ptr<const TerrainModel> terrain) {
   std::lock_guard lock(mu_);
   terrain_ = std::move(terrain);
+}
+
+std::shared_ptr<const TerrainModel> SceneState::terrain() const {
+  std::lock_guard lock(mu_);
+  return terrain_;
+}
+
+void SceneState::SetObservers(FrameObserver frames, SweepObserver sweeps) {
+  frame_observer_ = std::move(frames);
+  sweep_observer_ = std::move(sweeps);
 }
 
 size_t SceneState::ObjectCount() const {

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <map>
 #include <memory>
@@ -122,7 +123,19 @@ class SceneState {
   // offset (never later than its receipt), else the server's receipt time: an agent that has not
   // yet measured its offset cannot make objects expire early or linger.
   void SetStaticModel(const TriangleMesh& mesh);
+  // The same ground shared with another state (a replay's, issue 18) without rebuilding it.
+  void SetTerrain(std::shared_ptr<const TerrainModel> terrain);
+  std::shared_ptr<const TerrainModel> terrain() const;
   size_t ObjectCount() const;
+
+  // Called after every accepted frame with a JPEG / sweep, on the accepting thread and outside the
+  // state's lock, with its capture time on the server clock (the object time above): the recorder
+  // (issue 18) hangs here. Set before any frame arrives; an observer must not block.
+  using FrameObserver = std::function<void(const std::string& id, const std::shared_ptr<const v1::SensorFrame>& frame,
+                                           int64_t received_ns, int64_t capture_server_ns)>;
+  using SweepObserver = std::function<void(const std::string& id, const std::shared_ptr<const v1::LidarSweepFrame>& sweep,
+                                           int64_t received_ns, int64_t capture_server_ns)>;
+  void SetObservers(FrameObserver frames, SweepObserver sweeps);
 
   // Monotonic counter bumped by every change; WaitForChange returns true when it moved past `seen`.
   uint64_t version() const;
@@ -167,6 +180,8 @@ class SceneState {
   ObjectFusion objects_;
   int64_t objects_expired_ns_ = 0;  // object time of the last ObjectFusion::Expire (run <= 10 Hz)
   uint64_t sessions_ = 0;
+  FrameObserver frame_observer_;
+  SweepObserver sweep_observer_;
   uint64_t version_ = 1;
   bool shut_down_ = false;
 };

@@ -70,6 +70,7 @@ std::string ServerMetrics::RenderPrometheus() const {
   capture_to_ingest_s.Render("ave_capture_to_ingest_seconds", "Capture (server clock) to acceptance.", out);
   ingest_to_send_s.Render("ave_ingest_to_send_seconds", "Acceptance to the write to a viewer.", out);
   capture_to_send_s.Render("ave_capture_to_send_seconds", "Capture (server clock) to the write to a viewer.", out);
+  if (render_extra) render_extra(out);
   return out;
 }
 

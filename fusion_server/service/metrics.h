@@ -52,6 +52,8 @@ struct ServerMetrics {
   LatencyHistogram capture_to_ingest_s;  // skew-corrected capture -> accepted by the server
   LatencyHistogram ingest_to_send_s;     // accepted -> written to a viewer
   LatencyHistogram capture_to_send_s;    // skew-corrected capture -> written to a viewer
+  // Appends further families (the recorder's ave_record_*, issue 18); set before serving.
+  std::function<void(std::string&)> render_extra;
 
   std::string RenderPrometheus() const;
 };

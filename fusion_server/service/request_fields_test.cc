@@ -62,6 +62,13 @@ const std::set<std::string>& CoveredFields() {
       "ave.v1.FootTrack.track_id", "ave.v1.FootTrack.position", "ave.v1.FootTrack.velocity_x_mps",
       "ave.v1.FootTrack.velocity_y_mps", "ave.v1.FootTrack.covariance", "ave.v1.FootTrack.age_sweeps",
       "ave.v1.LidarPoints.count", "ave.v1.LidarPoints.packed", "ave.v1.SubscribeRequest.include_lidar_points",
+      // Issue 18: SceneService.Replay (ReplayFieldsAreRefusedByName below).
+      "ave.v1.ReplayRequest.viewer_id", "ave.v1.ReplayRequest.camera_ids", "ave.v1.ReplayRequest.start_time_ns",
+      "ave.v1.ReplayRequest.end_time_ns", "ave.v1.ReplayRequest.rate", "ave.v1.ReplayRequest.include_jpeg",
+      "ave.v1.ReplayRequest.views", "ave.v1.ReplayRequest.max_rate_hz", "ave.v1.ReplayRequest.include_lidar_points",
+      "ave.v1.ReplayRequest.max_updates", "ave.v1.ReplayRequest.purpose",
+      // Issue 18: SceneService.RecordedSpans (RecordedSpansFieldsAreRefusedByName below).
+      "ave.v1.RecordedSpansRequest.camera_ids", "ave.v1.RecordedSpansRequest.merge_gap_ns",
   };
   return fields;
 }
@@ -407,6 +414,87 @@ TEST_F(RequestFieldsTest, SubscribeFieldsAreRefusedByName) {
   const grpc::Status s = Subscribe(request, &update);
   EXPECT_TRUE(s.ok()) << s.error_message();
   EXPECT_EQ(update.cameras_size(), 1);
+}
+
+// Issue 18: every ReplayRequest field with a bad value, named; the fields any value of which is
+// fine reach the next check (this server does not record: FAILED_PRECONDITION naming --record-dir).
+// Recorded data, gaps and roles are in replay_service_test.cc.
+TEST_F(RequestFieldsTest, ReplayFieldsAreRefusedByName) {
+  auto replay = [&](const v1::ReplayRequest& request) {
+    grpc::ClientContext context;
+    context.AddMetadata("authorization", std::string("Bearer ") + kViewer);
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+    auto reader = scene_->Replay(&context, request);
+    v1::SceneUpdate update;
+    while (reader->Read(&update)) {
+    }
+    return reader->Finish();
+  };
+  struct Case {
+    const char* what;
+    std::function<void(v1::ReplayRequest&)> mutate;
+    const char* names;
+  };
+  const std::vector<Case> cases = {
+      {"viewer_id", [](auto& r) { r.set_viewer_id(std::string(129, 'v')); }, "viewer_id"},
+      {"camera_ids", [](auto& r) { r.add_camera_ids("a/b"); }, "camera_ids: 'a/b'"},
+      {"start after end", [](auto& r) { r.set_start_time_ns(r.end_time_ns()); }, "end_time_ns"},
+      {"end before start", [](auto& r) { r.set_end_time_ns(r.start_time_ns() - 1); }, "end_time_ns"},
+      {"rate too fast", [](auto& r) { r.set_rate(17); }, "rate: must be 0 (1x) or 0.25 .. 16"},
+      {"rate nan", [](auto& r) { r.set_rate(NAN); }, "rate"},
+      {"max_rate_hz", [](auto& r) { r.set_max_rate_hz(-1); }, "max_rate_hz"},
+      {"views", [](auto& r) { r.add_views()->add_view_projection(1); }, "views[0].view_projection: 16 floats"},
+      {"purpose", [](auto& r) { r.set_purpose("backup"); }, "purpose"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.what);
+    v1::ReplayRequest request;
+    request.set_start_time_ns(1'000'000'000);
+    request.set_end_time_ns(2'000'000'000);
+    c.mutate(request);
+    const grpc::Status s = replay(request);
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << s.error_message();
+    EXPECT_THAT(s.error_message(), HasSubstr(c.names));
+  }
+  v1::ReplayRequest request;
+  request.set_start_time_ns(1'000'000'000);
+  request.set_end_time_ns(2'000'000'000);
+  request.set_include_jpeg(true);
+  request.set_include_lidar_points(true);
+  request.set_max_updates(std::numeric_limits<uint32_t>::max());
+  request.set_rate(0.25f);
+  request.set_purpose("export");
+  const grpc::Status s = replay(request);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::FAILED_PRECONDITION) << s.error_message();
+  EXPECT_THAT(s.error_message(), HasSubstr("--record-dir"));
+}
+
+// Issue 18: RecordedSpansRequest's fields with bad values, named; good ones reach the next check
+// (this server does not record: FAILED_PRECONDITION naming --record-dir).
+TEST_F(RequestFieldsTest, RecordedSpansFieldsAreRefusedByName) {
+  auto spans = [&](const v1::RecordedSpansRequest& request) {
+    grpc::ClientContext context;
+    context.AddMetadata("authorization", std::string("Bearer ") + kViewer);
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+    v1::RecordedSpansResponse response;
+    return scene_->RecordedSpans(&context, request, &response);
+  };
+  v1::RecordedSpansRequest bad_id;
+  bad_id.add_camera_ids("a/b");
+  grpc::Status s = spans(bad_id);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << s.error_message();
+  EXPECT_THAT(s.error_message(), HasSubstr("camera_ids: 'a/b'"));
+  v1::RecordedSpansRequest bad_gap;
+  bad_gap.set_merge_gap_ns(-1);
+  s = spans(bad_gap);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << s.error_message();
+  EXPECT_THAT(s.error_message(), HasSubstr("merge_gap_ns"));
+  v1::RecordedSpansRequest good;
+  good.add_camera_ids("cam1");
+  good.set_merge_gap_ns(std::numeric_limits<int64_t>::max());
+  s = spans(good);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::FAILED_PRECONDITION) << s.error_message();
+  EXPECT_THAT(s.error_message(), HasSubstr("--record-dir"));
 }
 
 TEST_F(RequestFieldsTest, GetStaticModelIgnoresKnownVersion) {

@@ -11,21 +11,18 @@
 #include "model_store/common/log.h"
 
 namespace ave::internal {
-namespace {
 
-// Data selection (issue 7): the request's view frusta as volumes in the server's local frame
-// (the static model's), cut at the model's floor.
-grpc::Status SelectionViews(const v1::SubscribeRequest& request, const std::vector<v1::StaticModelChunk>& chunks,
-                                double floor_z, ViewerCursor& cursor) {
-  if (request.views_size() > 16) {
+grpc::Status SelectionViews(const google::protobuf::RepeatedPtrField<v1::ViewFrustum>& views,
+                            const std::vector<v1::StaticModelChunk>& chunks, double floor_z, ViewerCursor& cursor) {
+  if (views.size() > 16) {
     return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "views: at most 16 view frusta per subscription");
   }
   const Eigen::Vector3d model_origin =
       chunks.empty() ? Eigen::Vector3d::Zero()
                      : Eigen::Vector3d(chunks[0].origin().x(), chunks[0].origin().y(), chunks[0].origin().z());
   cursor.selection_floor_z = floor_z;
-  for (int i = 0; i < request.views_size(); ++i) {
-    const v1::ViewFrustum& f = request.views(i);
+  for (int i = 0; i < views.size(); ++i) {
+    const v1::ViewFrustum& f = views.Get(i);
     if (f.view_projection_size() != 16) {
       return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
                           absl::StrCat("views[", i, "].view_projection: 16 floats expected, got ", f.view_projection_size()));
@@ -51,8 +48,6 @@ grpc::Status SelectionViews(const v1::SubscribeRequest& request, const std::vect
   }
   return grpc::Status::OK;
 }
-
-}  // namespace
 
 double SceneServiceImpl::ModelFloorZ(const std::vector<v1::StaticModelChunk>& chunks) {
   double floor_z = std::numeric_limits<double>::infinity();
@@ -85,7 +80,7 @@ grpc::Status SceneServiceImpl::Subscribe(grpc::ServerContext* context, const v1:
   }
   ViewerCursor cursor;
   cursor.include_lidar_points = request->include_lidar_points();
-  if (grpc::Status s = SelectionViews(*request, chunks_, floor_z_, cursor); !s.ok()) return s;
+  if (grpc::Status s = SelectionViews(request->views(), chunks_, floor_z_, cursor); !s.ok()) return s;
   const std::vector<std::string> camera_ids(request->camera_ids().begin(), request->camera_ids().end());
   const float rate_hz = std::min(options_.max_viewer_rate_hz,
                                  request->max_rate_hz() > 0 ? request->max_rate_hz() : options_.default_viewer_rate_hz);

@@ -145,6 +145,7 @@ grpc::Status AuthorizeCall(ServerShared& shared, const grpc::ServerContext& cont
 
 grpc::Status SensorServiceImpl::Stream(grpc::ServerContext* context,
                                        grpc::ServerReaderWriter<v1::SensorAck, v1::SensorMessage>* stream) {
+  const int64_t stream_start_ns = NowNs();  // acks report what this stream got recorded
   const std::string peer = context->peer();
   v1::SensorMessage message;
   if (!stream->Read(&message)) {
@@ -238,6 +239,7 @@ grpc::Status SensorServiceImpl::Stream(grpc::ServerContext* context,
     ack.set_sequence(last_sequence);
     ack.set_server_time_ns(NowNs());
     ack.set_capture_time_ns(capture_ns);
+    if (shared_.recorder) ack.set_recorded_sequence(shared_.recorder->RecordedSequence(id, stream_start_ns));
     ack.mutable_hint()->set_max_fps(flow.max_fps);
     ack.mutable_hint()->set_jpeg_quality(flow.jpeg_quality);
     ack.mutable_hint()->set_saturated(flow.saturated);
@@ -258,6 +260,7 @@ grpc::Status SensorServiceImpl::Stream(grpc::ServerContext* context,
 
 grpc::Status SensorServiceImpl::StreamLidar(const std::string& id,
                                             grpc::ServerReaderWriter<v1::SensorAck, v1::SensorMessage>* stream) {
+  const int64_t stream_start_ns = NowNs();  // acks report what this stream got recorded
   const uint64_t session = state_.StreamOpened(id);
   ServerMetrics& metrics = shared_.metrics;
   ++metrics.sensors_connected;
@@ -294,6 +297,7 @@ grpc::Status SensorServiceImpl::StreamLidar(const std::string& id,
     ack.set_sequence(last_sequence);
     ack.set_server_time_ns(NowNs());
     ack.set_capture_time_ns(capture_ns);
+    if (shared_.recorder) ack.set_recorded_sequence(shared_.recorder->RecordedSequence(id, stream_start_ns));
     if (!stream->Write(ack)) break;
     if (state_.shut_down()) {
       result = grpc::Status(grpc::StatusCode::UNAVAILABLE, "server shutting down; reconnect later");

@@ -4,12 +4,14 @@
 #include <condition_variable>
 #include <functional>
 #include <mutex>
+#include <set>
 #include <thread>
 
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
 
 #include "absl/strings/str_cat.h"
+#include "fusion_server/record/replay.h"
 #include "fusion_server/service/services.h"
 #include "model_store/common/log.h"
 #include "model_store/scene/campus.h"
@@ -34,6 +36,9 @@ std::string ServerOptions::Check() const {
   if (jpeg_quality_hint > 100) return "jpeg_quality_hint must be 0..100";
   if (!(default_viewer_rate_hz > 0) || !(max_viewer_rate_hz > 0)) return "viewer rates must be > 0";
   if (!(campus_grid_m >= 0.25 && campus_grid_m <= 20)) return "campus_grid_m must be in 0.25..20";
+  if (!record_dir.empty() && store_path == ":memory:") return "--record-dir needs a store file (--store), not :memory:";
+  if (record_retention.count() < 0) return "--retention must be >= 0 s";
+  if (record_max_bytes < 0) return "--record-max-bytes must be >= 0";
   return {};
 }
 
@@ -78,6 +83,7 @@ struct FusionServer::Impl {
   std::unique_ptr<store::Store> store;
   SceneState state;
   std::unique_ptr<internal::ServerShared> shared;
+  std::unique_ptr<record::Recorder> recorder;  // issue 18; null when not recording
   std::unique_ptr<MetricsHttpServer> metrics_http;
   std::unique_ptr<PeriodicTask> plaintext_warning;  // while serving plaintext off loopback
   uint64_t model_version = 0;
@@ -90,6 +96,56 @@ struct FusionServer::Impl {
 
   explicit Impl(const ServerOptions& o) : options(o), state(o.scene) {}
 };
+
+namespace {
+
+// Recording (issue 18): the recorder hangs on the state's accepted frames and sweeps; the fused
+// objects are sampled by its writer thread; its counters join the Prometheus text.
+absl::Status StartRecorder(FusionServer::Impl& impl) {
+  record::RecorderOptions ro;
+  ro.dir = impl.options.record_dir;
+  ro.max_age = impl.options.record_retention;
+  ro.max_bytes = impl.options.record_max_bytes;
+  SceneState* state = &impl.state;
+  ro.objects_source = [state] {
+    ViewerCursor cursor;
+    v1::SceneUpdate update = state->BuildUpdate({}, false, record::WallNowNs(), cursor);
+    update.clear_cameras();
+    update.clear_lidars();
+    update.clear_removed_camera_ids();
+    return update;
+  };
+  absl::StatusOr<std::unique_ptr<record::Recorder>> recorder = record::Recorder::Open(impl.options.store_path, ro);
+  if (!recorder.ok()) return recorder.status();
+  impl.recorder = *std::move(recorder);
+  record::Recorder* r = impl.recorder.get();
+  impl.shared->recorder = r;
+  // Each sensor's registry entry is noted with its first recorded frame of this server's life, so
+  // that it replays after being removed from the registry.
+  auto noted = std::make_shared<std::pair<std::mutex, std::set<std::string>>>();
+  auto note = [r, state, noted](const std::string& id) {
+    {
+      std::lock_guard lock(noted->first);
+      if (!noted->second.insert(id).second) return;
+    }
+    if (std::optional<CameraEntry> entry = state->FindCamera(id)) r->NoteSensor(id, record::EntryBytes(*entry));
+  };
+  impl.state.SetObservers(
+      [r, note](const std::string& id, const std::shared_ptr<const v1::SensorFrame>& frame, int64_t received_ns,
+                int64_t capture_server_ns) {
+        note(id);
+        r->SubmitFrame(id, frame, received_ns, capture_server_ns);
+      },
+      [r, note](const std::string& id, const std::shared_ptr<const v1::LidarSweepFrame>& sweep, int64_t received_ns,
+                int64_t capture_server_ns) {
+        note(id);
+        r->SubmitSweep(id, sweep, received_ns, capture_server_ns);
+      });
+  impl.shared->metrics.render_extra = [r](std::string& out) { r->RenderPrometheus(out); };
+  return absl::OkStatus();
+}
+
+}  // namespace
 
 FusionServer::FusionServer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 
@@ -134,6 +190,9 @@ absl::StatusOr<std::unique_ptr<FusionServer>> FusionServer::Start(const ServerOp
   }
 
   impl->shared = std::make_unique<internal::ServerShared>(impl->options, impl->state, *impl->store);
+  if (!options.record_dir.empty()) {
+    if (absl::Status s = StartRecorder(*impl); !s.ok()) return s;
+  }
   // Tokens: bootstrap ones from the options, then the issued ones in the store (hashes only).
   TokenRegistry& tokens = impl->shared->tokens;
   const std::pair<const std::string*, Role> bootstrap[] = {
@@ -221,6 +280,9 @@ int FusionServer::port() const { return impl_->port; }
 int FusionServer::metrics_port() const { return impl_->metrics_http ? impl_->metrics_http->port() : 0; }
 std::string FusionServer::RenderMetrics() const { return impl_->shared->metrics.RenderPrometheus(); }
 SceneState& FusionServer::state() { return impl_->state; }
+void FusionServer::DrainRecorder() {
+  if (impl_->recorder) impl_->recorder->Drain();
+}
 uint64_t FusionServer::static_model_version() const { return impl_->model_version; }
 
 void FusionServer::Shutdown(std::chrono::milliseconds grace) {

@@ -51,6 +51,11 @@ struct ServerOptions {
   bool seed_campus = true;     // store the built-in campus as the static model when the store has none
   double campus_grid_m = 2.0;  // its terrain grid resolution
   SceneStateOptions scene;
+  // Recording (issue 18): when record_dir is set, every accepted frame is recorded there (segment
+  // files) with its index in the store file (which must then be a file, not ":memory:").
+  std::string record_dir;
+  std::chrono::seconds record_retention{0};  // delete recordings older than this; 0 = keep
+  int64_t record_max_bytes = 0;              // recording budget in bytes; 0 = the disk's size
 
   // Empty when usable, else names the bad field.
   std::string Check() const;
@@ -65,6 +70,8 @@ class FusionServer {
   int metrics_port() const;  // 0 when metrics are off
   std::string RenderMetrics() const;
   SceneState& state();
+  // Blocks until every frame accepted before the call is recorded and indexed (no-op when not recording).
+  void DrainRecorder();
   uint64_t static_model_version() const;
 
   // Stops accepting calls, wakes every subscriber and ends open streams after `grace`.

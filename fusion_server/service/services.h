@@ -12,6 +12,7 @@
 #include "fusion_server/core/auth_limiter.h"
 #include "fusion_server/core/flow.h"
 #include "fusion_server/core/scene_state.h"
+#include "fusion_server/record/recorder.h"
 #include "fusion_server/service/metrics.h"
 #include "fusion_server/service/server.h"
 #include "model_store/db/store.h"
@@ -35,6 +36,7 @@ struct ServerShared {
   RateWindow viewer_sent;     // bytes field = JPEGs written to viewers
   RateWindow viewer_skipped;  // bytes field = frames skipped for viewers
   FlowDecision Flow();        // the hint for sensors now (also sets metrics.saturated)
+  record::Recorder* recorder = nullptr;  // issue 18: set when recording (--record-dir)
 };
 
 // Authenticates the call's bearer token ("authorization: Bearer <token>" metadata, or `token`
@@ -70,6 +72,12 @@ class SceneServiceImpl final : public v1::SceneService::Service {
                          grpc::ServerWriter<v1::SceneUpdate>* writer) override;
   grpc::Status GetStaticModel(grpc::ServerContext* context, const v1::StaticModelRequest* request,
                               grpc::ServerWriter<v1::StaticModelChunk>* writer) override;
+  // Issue 18 (replay_service.cc): the recorded scene as it was, paced; audited.
+  grpc::Status Replay(grpc::ServerContext* context, const v1::ReplayRequest* request,
+                      grpc::ServerWriter<v1::SceneUpdate>* writer) override;
+  // Issue 18: each camera's recorded intervals (the viewer's time line); index rows only.
+  grpc::Status RecordedSpans(grpc::ServerContext* context, const v1::RecordedSpansRequest* request,
+                             v1::RecordedSpansResponse* response) override;
 
  private:
   ServerShared& shared_;
@@ -110,6 +118,11 @@ class AdminServiceImpl final : public v1::AdminService::Service {
   SceneState& state_;
   store::Store& store_;
 };
+
+// Data selection (issue 7): view frusta as volumes in the server's local frame (the static model's),
+// cut at the model's floor, into cursor.views. InvalidArgument naming views[i] and the field.
+grpc::Status SelectionViews(const google::protobuf::RepeatedPtrField<v1::ViewFrustum>& views,
+                            const std::vector<v1::StaticModelChunk>& chunks, double floor_z, ViewerCursor& cursor);
 
 // Splits a mesh into chunks of at most `max_vertices` vertices with chunk-local indices.
 std::vector<v1::StaticModelChunk> ChunkMesh(const TriangleMesh& mesh, uint64_t version, const std::string& name,

@@ -79,6 +79,36 @@ const std::vector<const char*>& Migrations() {
       R"sql(
       ALTER TABLE cameras ADD COLUMN kind TEXT NOT NULL DEFAULT 'camera';
       )sql",
+      // 4 -> 5: the recording index (issue 18). JPEG bytes live in per-camera segment files (never
+      // in SQLite); a row names its segment, byte offset and length. Rows are committed only after
+      // their bytes were written and fdatasync'd, so a row never points at missing bytes. `meta` is
+      // the ave.v1.SensorFrame / LidarSweepFrame without its JPEG / points (pose + covariance,
+      // boxes, tracks, clock offset); times are on the server clock (capture_server_ns: the
+      // capture time corrected by the agent's clock offset, never later than received_ns).
+      // record_sensors keeps each recorded sensor's registry entry (ave.v1.Camera) so that a
+      // sensor removed from the registry still replays; record_objects the fused objects
+      // (ave.v1.SceneUpdate holding only objects) at a bounded rate.
+      R"sql(
+      CREATE TABLE record_segments (
+        id INTEGER PRIMARY KEY AUTOINCREMENT, sensor_id TEXT NOT NULL, path TEXT NOT NULL UNIQUE,
+        start_ns INTEGER NOT NULL, end_ns INTEGER NOT NULL, bytes INTEGER NOT NULL, closed INTEGER NOT NULL);
+      CREATE INDEX record_segments_start ON record_segments (start_ns);
+      CREATE TABLE record_frames (
+        segment_id INTEGER NOT NULL REFERENCES record_segments(id) ON DELETE CASCADE,
+        sensor_id TEXT NOT NULL, sequence INTEGER NOT NULL, capture_server_ns INTEGER NOT NULL,
+        received_ns INTEGER NOT NULL, offset INTEGER NOT NULL, length INTEGER NOT NULL, meta BLOB NOT NULL);
+      CREATE INDEX record_frames_time ON record_frames (capture_server_ns);
+      CREATE INDEX record_frames_sensor_time ON record_frames (sensor_id, capture_server_ns);
+      CREATE INDEX record_frames_segment ON record_frames (segment_id);
+      CREATE TABLE record_sweeps (
+        sensor_id TEXT NOT NULL, sequence INTEGER NOT NULL, capture_server_ns INTEGER NOT NULL,
+        received_ns INTEGER NOT NULL, meta BLOB NOT NULL);
+      CREATE INDEX record_sweeps_time ON record_sweeps (capture_server_ns);
+      CREATE TABLE record_objects (t_ns INTEGER NOT NULL, objects BLOB NOT NULL);
+      CREATE INDEX record_objects_time ON record_objects (t_ns);
+      CREATE TABLE record_sensors (
+        sensor_id TEXT PRIMARY KEY NOT NULL, camera BLOB NOT NULL, updated_ns INTEGER NOT NULL);
+      )sql",
   };
   return kSteps;
 }

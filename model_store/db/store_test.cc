@@ -621,6 +621,36 @@ TEST(Store, Camera_RotatingLidarRoundTripsWithItsKindAndNoIntrinsics) {
   EXPECT_EQ((*store)->GetCamera("hdl64")->kind, kSensorKindRotatingLidar);
 }
 
+// Schema v4 -> v5 (issue 18): a store from before recording gains the empty recording index and
+// keeps its cameras.
+TEST(Store, File_Version4StoreGainsTheRecordingIndex) {
+  TempDir dir;
+  const std::string path = dir.File("v4.db");
+  {
+    auto store = OpenOrDie(path);
+    ASSERT_TRUE(store);
+    ASSERT_TRUE(store->AddCamera(MakeCamera("north")).ok());
+  }
+  {
+    RawDb raw(path);
+    for (const char* table : {"record_frames", "record_segments", "record_sweeps", "record_objects", "record_sensors"}) {
+      ASSERT_EQ(raw.Exec(std::string("DROP TABLE ") + table), SQLITE_OK) << table;
+    }
+    ASSERT_EQ(raw.Exec("PRAGMA user_version = 4"), SQLITE_OK);
+  }
+  auto store = OpenOrDie(path);
+  ASSERT_TRUE(store);
+  EXPECT_EQ(store->SchemaVersion(), Store::LatestSchemaVersion());
+  EXPECT_TRUE(store->GetCamera("north").ok());
+  RawDb raw(path);
+  EXPECT_EQ(raw.Exec("SELECT segment_id, sensor_id, sequence, capture_server_ns, received_ns, offset, length, meta "
+                     "FROM record_frames"),
+            SQLITE_OK)
+      << raw.Error();
+  EXPECT_EQ(raw.Exec("SELECT id, sensor_id, path, start_ns, end_ns, bytes, closed FROM record_segments"), SQLITE_OK)
+      << raw.Error();
+}
+
 // Schema v3 -> v4: cameras registered before issue 16 read back as cameras, unchanged.
 TEST(Store, File_CamerasOfAVersion3StoreBecomeCameraKind) {
   TempDir dir;
@@ -633,6 +663,10 @@ TEST(Store, File_CamerasOfAVersion3StoreBecomeCameraKind) {
   {
     RawDb raw(path);
     ASSERT_EQ(raw.Exec("ALTER TABLE cameras DROP COLUMN kind"), SQLITE_OK);
+    // What later migrations added goes too, so the file is a true version 3 one (v5: issue 18).
+    for (const char* table : {"record_frames", "record_segments", "record_sweeps", "record_objects", "record_sensors"}) {
+      ASSERT_EQ(raw.Exec(std::string("DROP TABLE ") + table), SQLITE_OK) << table;
+    }
     ASSERT_EQ(raw.Exec("PRAGMA user_version = 3"), SQLITE_OK);
   }
   auto store = OpenOrDie(path);

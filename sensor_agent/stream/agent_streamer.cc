@@ -160,6 +160,7 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
         stats_.clock_offset_ns = estimator.offset_ns();
         stats_.clock_rtt_ns = estimator.rtt_ns();
         stats_.hint_fps = hint_fps;
+        stats_.recorded_sequence = std::max(stats_.recorded_sequence, ack.recorded_sequence());
       }
     });
     auto send = [&](v1::SensorMessage& message) {

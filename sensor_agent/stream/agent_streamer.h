@@ -76,6 +76,9 @@ struct AgentStats {
   int64_t clock_offset_ns = 0;    // current estimate of server clock - sensor clock
   int64_t clock_rtt_ns = 0;       // round trip of the sample it came from
   float hint_fps = 0;             // last flow hint
+  // The highest SensorAck.recorded_sequence (issue 18): that frame is on the server's disk and
+  // indexed; a server crash cannot lose it. 0: none yet, or the server does not record.
+  uint64_t recorded_sequence = 0;
   std::string last_error;
 };
 

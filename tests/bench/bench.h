@@ -52,6 +52,9 @@ Runner AddLidarWireBench(CLI::App& sub);
 // volume IoU, Chamfer, texture error per voxel size vs ms per frame set, VTK and flat-carving peers
 // (studio_bench.cc).
 Runner AddStudioBench(CLI::App& sub);
+// `ave-bench record` (issue 18): server CPU with recording on vs off under ave-loadgen's load, MB/s
+// written, recorder drops, seek and replay start-up latency, index bytes per hour (record_bench.cc).
+Runner AddRecordBench(CLI::App& sub);
 
 // Pins the process to one CPU and keeps OpenCV single-threaded, so figures are per core.
 void UseOneCore();

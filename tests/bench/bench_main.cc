@@ -22,6 +22,7 @@ int main(int argc, char** argv) {
   runners["lidar-decode"] = ave::bench::AddLidarDecodeBench(*app.add_subcommand("lidar-decode", "Velodyne pcap source: sweeps/s, points/s, realtime factor, libpcap peer, RSS over a long replay"));
   runners["lidar"] = ave::bench::AddLidarBench(*app.add_subcommand("lidar", "LiDAR people tracking: foreground P/R, MOTA, ID switches per chain vs ms per sweep, MOG2 peer"));
   runners["lidar-wire"] = ave::bench::AddLidarWireBench(*app.add_subcommand("lidar-wire", "rotating LiDAR stream: bytes and server us per sweep (tracks, points) next to a camera frame"));
+  runners["record"] = ave::bench::AddRecordBench(*app.add_subcommand("record", "recording: server CPU with vs without, MB/s, drops, seek and replay start-up latency, index size"));
   runners["studio"] = ave::bench::AddStudioBench(*app.add_subcommand("studio", "4D studio: silhouette and volume IoU, Chamfer, texture error per voxel size vs ms per frame set, peers"));
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-bench")) return *exit_code;
   for (auto& [name, run] : runners) {

@@ -315,6 +315,88 @@ bool Overlay::WantsMouse() const {
   return ImGui::GetIO().WantCaptureMouse;
 }
 
+namespace {
+
+// The panel's Replay section (issue 18): zoom, the time line (a row per recorded camera, drag to
+// seek), play / pause / live and the rate presets.
+void ReplaySection(OverlayState& state) {
+  using Command = OverlayState::ReplayCommand;
+  static constexpr const char* kZoomNames[] = {"1 min", "10 min", "1 h", "all"};
+  static constexpr double kZoomS[] = {60, 600, 3600, 0};
+  for (int i = 0; i < 4; ++i) {
+    if (i > 0) ImGui::SameLine();
+    ImGui::RadioButton(kZoomNames[i], &state.timeline_zoom, i);
+  }
+  const int64_t right_ns = state.timeline_now_ns;
+  int64_t left_ns = right_ns - 60'000'000'000;
+  if (const double span_s = kZoomS[std::clamp(state.timeline_zoom, 0, 3)]; span_s > 0) {
+    left_ns = right_ns - static_cast<int64_t>(span_s * 1e9);
+  } else {
+    for (const RecordedCameraSpans& camera : state.recorded.cameras) {
+      if (!camera.intervals_ns.empty()) left_ns = std::min(left_ns, camera.intervals_ns.front().first);
+    }
+  }
+  const double span_ns = std::max<double>(1, static_cast<double>(right_ns - left_ns));
+  const size_t rows = std::max<size_t>(1, state.recorded.cameras.size());
+  const float row_h = std::clamp(72.f / static_cast<float>(rows), 2.f, 8.f);
+  const float width = std::max(200.f, ImGui::GetContentRegionAvail().x);
+  const ImVec2 p0 = ImGui::GetCursorScreenPos();
+  const ImVec2 size(width, row_h * static_cast<float>(rows) + 4);
+  ImDrawList* dl = ImGui::GetWindowDrawList();
+  auto x_of = [&](int64_t t_ns) {
+    return p0.x + static_cast<float>(std::clamp((t_ns - left_ns) / span_ns, 0.0, 1.0)) * size.x;
+  };
+  dl->AddRectFilled(p0, ImVec2(p0.x + size.x, p0.y + size.y), IM_COL32(40, 40, 46, 255));
+  for (size_t r = 0; r < state.recorded.cameras.size(); ++r) {
+    const float y = p0.y + 2 + row_h * static_cast<float>(r);
+    for (const auto& [from_ns, to_ns] : state.recorded.cameras[r].intervals_ns) {
+      if (to_ns < left_ns) continue;
+      dl->AddRectFilled(ImVec2(x_of(from_ns), y), ImVec2(std::max(x_of(to_ns), x_of(from_ns) + 1), y + row_h - 1),
+                        IM_COL32(70, 170, 230, 255));
+    }
+  }
+  const int64_t shown_ns = state.replay_time_ns > 0 ? state.replay_time_ns : right_ns;
+  dl->AddLine(ImVec2(x_of(shown_ns), p0.y), ImVec2(x_of(shown_ns), p0.y + size.y),
+              state.replay_time_ns > 0 ? IM_COL32(250, 210, 40, 255) : IM_COL32(235, 60, 50, 255), 2);
+  state.timeline_rect_px = {p0.x, p0.y, size.x, size.y};
+  ImGui::InvisibleButton("timeline", size);
+  auto time_at = [&](float x) {
+    return left_ns + static_cast<int64_t>(std::clamp((x - p0.x) / size.x, 0.f, 1.f) * span_ns);
+  };
+  if (ImGui::IsItemActive()) {
+    const float x = std::clamp(ImGui::GetIO().MousePos.x, p0.x, p0.x + size.x);
+    dl->AddLine(ImVec2(x, p0.y), ImVec2(x, p0.y + size.y), IM_COL32(255, 255, 255, 255), 1);
+    ImGui::SetTooltip("%.1f s before now", (right_ns - time_at(x)) * 1e-9);
+  }
+  if (ImGui::IsItemDeactivated()) {
+    state.replay_seek_ns = time_at(ImGui::GetIO().MousePos.x);
+    state.replay_command = Command::kSeek;
+  }
+  ImGui::TextDisabled("%.0f s ago ... now; %zu cameras recorded; drag to seek", (right_ns - left_ns) * 1e-9,
+                      state.recorded.cameras.size());
+  if (ImGui::Button("play")) state.replay_command = Command::kPlay;
+  ImGui::SameLine();
+  if (ImGui::Button("pause")) state.replay_command = Command::kPause;
+  ImGui::SameLine();
+  if (ImGui::Button("live")) state.replay_command = Command::kLive;
+  ImGui::SameLine();
+  ImGui::TextUnformatted(state.replay_status.c_str());
+  // Rate presets: a button sets the rate exactly (a typed value never has to be parsed).
+  static constexpr float kRates[] = {0.25f, 0.5f, 1, 2, 4, 8, 16};
+  for (size_t i = 0; i < std::size(kRates); ++i) {
+    if (i > 0) ImGui::SameLine();
+    const bool active = state.replay_rate == kRates[i];
+    if (active) ImGui::PushStyleColor(ImGuiCol_Button, IM_COL32(200, 150, 30, 255));
+    if (ImGui::Button(absl::StrFormat("%gx", kRates[i]).c_str()) && !active) {
+      state.replay_rate = kRates[i];
+      state.replay_command = Command::kRate;
+    }
+    if (active) ImGui::PopStyleColor();
+  }
+}
+
+}  // namespace
+
 void Overlay::Panel(const std::vector<CameraView>& cameras, const OverlayStats& stats, int64_t now_ns,
                     OverlayState& state, const std::vector<LidarView>& lidars) {
   if (!state.panel) return;
@@ -397,6 +479,11 @@ void Overlay::Panel(const std::vector<CameraView>& cameras, const OverlayStats& 
                   lidar.tracks.size(), lidar.points ? lidar.points->p_local.size() : size_t{0});
     }
   }
+  if (state.open_replay) {
+    ImGui::SetNextItemOpen(true);
+    state.open_replay = false;
+  }
+  if (ImGui::CollapsingHeader("Replay")) ReplaySection(state);
   ImGui::Text("subscriptions: %llu  servers: %d", static_cast<unsigned long long>(stats.subscriptions), stats.servers);
   ImGui::PopItemWidth();
   ImGui::End();

@@ -33,6 +33,24 @@ struct OverlayState {
   bool lidar_points = true;
   std::string selected_camera;                  // highlighted in every view
   std::array<std::string, 3> locked;            // cameras of the three locked views ("" = plan view)
+  // Replay (issue 18), the panel's "Replay" section: a time line of each camera's recorded
+  // intervals (`recorded`, refreshed by the viewer from SceneService.RecordedSpans) ending at
+  // timeline_now_ns; a drag on it seeks (kSeek at replay_seek_ns, on release), "play" resumes a
+  // pause (or starts replay_back_s before now), "pause" stops where it is, "live" goes back to
+  // live; rate presets 0.25x .. 16x. The viewer consumes replay_command each frame and sets
+  // replay_status, replay_time_ns (the recorded time shown, 0 when live) and the rest.
+  enum class ReplayCommand { kNone, kPlay, kPause, kLive, kSeek, kRate };
+  ReplayCommand replay_command = ReplayCommand::kNone;
+  int64_t replay_seek_ns = 0;
+  float replay_back_s = 60;
+  float replay_rate = 1;
+  std::string replay_status = "live";
+  RecordedSpans recorded;
+  int64_t timeline_now_ns = 0;  // the time line's right end (the viewer's clock)
+  int64_t replay_time_ns = 0;
+  int timeline_zoom = 1;  // index of the shown span: 1 min, 10 min, 1 h, everything recorded
+  bool open_replay = false;  // set: the Replay section opens on the next panel (then cleared)
+  std::array<float, 4> timeline_rect_px{};  // where the time line was last drawn: x, y, width, height
 };
 
 // Figures the panel shows.

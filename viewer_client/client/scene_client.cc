@@ -1,6 +1,9 @@
 #include "viewer_client/client/scene_client.h"
 
+#include <algorithm>
 #include <limits>
+#include <optional>
+#include <utility>
 
 #include <grpcpp/grpcpp.h>
 #include <opencv2/core.hpp>
@@ -139,9 +142,50 @@ absl::StatusOr<TriangleMesh> SceneClient::FetchStaticModel(uint64_t* version) {
   return mesh;
 }
 
+ReplaySeek PlanSeek(int64_t seek_ns, int64_t now_ns, const RecordedSpans& spans, int64_t live_margin_ns) {
+  if (seek_ns >= now_ns - live_margin_ns) return {};
+  // The earliest recorded instant at or after seek_ns over every camera.
+  std::optional<int64_t> start_ns;
+  for (const RecordedCameraSpans& camera : spans.cameras) {
+    for (const auto& [from_ns, to_ns] : camera.intervals_ns) {
+      if (to_ns < seek_ns) continue;
+      const int64_t t = std::max(from_ns, seek_ns);
+      if (!start_ns || t < *start_ns) start_ns = t;
+    }
+  }
+  if (!start_ns || *start_ns >= now_ns - live_margin_ns) return {};
+  return {.live = false, .from_ns = *start_ns, .to_ns = now_ns};
+}
+
+absl::StatusOr<RecordedSpans> SceneClient::FetchRecordedSpans(const std::vector<std::string>& camera_ids) {
+  auto stub = v1::SceneService::NewStub(channel_);
+  grpc::ClientContext context;
+  context.AddMetadata("authorization", "Bearer " + token_);
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  v1::RecordedSpansRequest request;
+  for (const std::string& id : camera_ids) request.add_camera_ids(id);
+  v1::RecordedSpansResponse response;
+  const grpc::Status status = stub->RecordedSpans(&context, request, &response);
+  if (!status.ok()) {
+    return absl::Status(static_cast<absl::StatusCode>(status.error_code()),
+                        "recorded spans: " + status.error_message());
+  }
+  RecordedSpans out;
+  out.server_time_ns = response.server_time_ns();
+  for (const v1::RecordedCamera& camera : response.cameras()) {
+    RecordedCameraSpans& c = out.cameras.emplace_back();
+    c.camera_id = camera.camera_id();
+    c.frames = camera.frames();
+    for (const v1::RecordedInterval& i : camera.intervals()) c.intervals_ns.emplace_back(i.from_ns(), i.to_ns());
+  }
+  return out;
+}
+
 void SceneClient::Start(const SubscribeOptions& options) {
   Stop();
   stop_ = false;
+  replay_ended_ = false;
+  replay_time_ns_ = 0;
   reselect_interval_ = options.reselect_interval;
   {
     std::lock_guard lock(mu_);
@@ -311,12 +355,37 @@ void SceneClient::Loop(SubscribeOptions options) {
       }
     }
     ++subscriptions_;
-    auto reader = stub->Subscribe(context.get(), request);
+    std::unique_ptr<grpc::ClientReader<v1::SceneUpdate>> reader;
+    if (options.replay()) {
+      // The same request fields, as a replay from where the last one reached (a re-request after
+      // a change of views is a seek).
+      v1::ReplayRequest replay;
+      replay.set_viewer_id(request.viewer_id());
+      *replay.mutable_camera_ids() = request.camera_ids();
+      replay.set_start_time_ns(std::max(options.replay_from_ns, replay_time_ns_.load()));
+      replay.set_end_time_ns(options.replay_to_ns);
+      replay.set_rate(options.replay_rate);
+      replay.set_include_jpeg(request.include_jpeg());
+      *replay.mutable_views() = request.views();
+      replay.set_max_rate_hz(request.max_rate_hz());
+      reader = stub->Replay(context.get(), replay);
+    } else {
+      reader = stub->Subscribe(context.get(), request);
+    }
     v1::SceneUpdate update;
+    bool replay_end = false;
     while (reader->Read(&update)) {
       if (stop_.load()) {
         context->TryCancel();
         break;
+      }
+      if (update.has_replay()) {
+        replay_time_ns_ = update.replay().replay_time_ns();
+        replay_end = update.replay().end();
+        for (const v1::ReplayGap& gap : update.replay().gaps()) {
+          AVE_LOG(WARNING) << "viewer '" << viewer_id_ << "': replay gap in camera '" << gap.camera_id() << "' ("
+                           << gap.frames() << " frames): " << gap.reason();
+        }
       }
       backoff = std::chrono::milliseconds(200);
       {
@@ -382,9 +451,18 @@ void SceneClient::Loop(SubscribeOptions options) {
       reselect = resubscribe_;
     }
     if (reselect) continue;  // cancelled by SetViews: subscribe again at once with the new views
+    if (options.replay() && (replay_end || status.error_code() == grpc::StatusCode::NOT_FOUND ||
+                             status.error_code() == grpc::StatusCode::INVALID_ARGUMENT ||
+                             status.error_code() == grpc::StatusCode::FAILED_PRECONDITION)) {
+      if (!status.ok()) AVE_LOG(ERROR) << "viewer '" << viewer_id_ << "': replay refused: " << status.error_message();
+      replay_ended_ = true;
+      changed_.notify_all();
+      break;
+    }
     if (status.error_code() == grpc::StatusCode::UNAUTHENTICATED ||
         status.error_code() == grpc::StatusCode::PERMISSION_DENIED) {
       AVE_LOG(ERROR) << "viewer '" << viewer_id_ << "': refused: " << status.error_message();
+      replay_ended_ = options.replay();
       break;
     }
     AVE_LOG(WARNING) << "viewer '" << viewer_id_ << "': subscription ended (" << status.error_message()

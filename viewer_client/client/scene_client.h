@@ -114,7 +114,35 @@ struct SubscribeOptions {
   // frame at least twice as large is decoded at 1/2, 1/4 or 1/8 scale by the JPEG decoder, never
   // below this size.
   int decode_width = 0, decode_height = 0;
+  // Replay (issue 18): when replay_to_ns > replay_from_ns, the client consumes SceneService.Replay
+  // of that recorded interval (server clock, ns since the Unix epoch) at replay_rate instead of the
+  // live subscription; everything downstream (snapshots, objects, LiDARs) is the same. A change
+  // of views re-requests from the recorded time reached. The client stops when the replay ends.
+  int64_t replay_from_ns = 0, replay_to_ns = 0;
+  float replay_rate = 1;
+  bool replay() const { return replay_to_ns > replay_from_ns; }
 };
+
+// What the server has recorded (issue 18, SceneService.RecordedSpans): the panel's time line.
+struct RecordedCameraSpans {
+  std::string camera_id;
+  std::vector<std::pair<int64_t, int64_t>> intervals_ns;  // [first, last] capture time, oldest first
+  uint64_t frames = 0;
+};
+struct RecordedSpans {
+  std::vector<RecordedCameraSpans> cameras;
+  int64_t server_time_ns = 0;  // the server clock when it answered
+};
+
+// Where a seek on the time line goes (a pure function of the spans, so it is tested without a
+// window). Seeking at or after now - live_margin_ns is live. Inside a recorded interval (of any
+// camera) the replay starts there; in a gap or before the first recording, at the next recorded
+// instant; after the last one recorded, live. A replay runs to now_ns.
+struct ReplaySeek {
+  bool live = true;
+  int64_t from_ns = 0, to_ns = 0;
+};
+ReplaySeek PlanSeek(int64_t seek_ns, int64_t now_ns, const RecordedSpans& spans, int64_t live_margin_ns = 1'000'000'000);
 
 // The JPEG scale divisor (1, 2, 4 or 8) that keeps a frame_width x frame_height frame at least
 // need_width x need_height; 1 when either need is 0 or the frame size is unknown.
@@ -130,6 +158,10 @@ class SceneClient {
 
   // The newest static model (all chunks merged), with its version.
   absl::StatusOr<TriangleMesh> FetchStaticModel(uint64_t* version = nullptr);
+
+  // Each camera's recorded intervals (all cameras when `camera_ids` is empty); the server must
+  // record. Segments closer than 2 s are one interval.
+  absl::StatusOr<RecordedSpans> FetchRecordedSpans(const std::vector<std::string>& camera_ids = {});
 
   // Starts the subscription thread; Stop() ends it.
   void Start(const SubscribeOptions& options);
@@ -162,6 +194,10 @@ class SceneClient {
   // The origin of the static model fetched (the local frame the views are in).
   Eigen::Vector3d model_origin() const;
   std::string last_error() const;
+  // Replay: whether it ended (its last update came, or the server refused it: last_error() says
+  // why), and the recorded time the newest update showed.
+  bool replay_ended() const { return replay_ended_.load(); }
+  int64_t replay_time_ns() const { return replay_time_ns_.load(); }
 
   // Waits until `ready(snapshot)` holds or the timeout passes; returns whether it held.
   bool WaitUntil(const std::function<bool(const std::vector<CameraView>&)>& ready, std::chrono::milliseconds timeout);
@@ -198,6 +234,8 @@ class SceneClient {
   std::string last_error_;
   std::atomic<uint64_t> updates_{0};
   std::atomic<bool> stop_{false};
+  std::atomic<bool> replay_ended_{false};
+  std::atomic<int64_t> replay_time_ns_{0};
   std::shared_ptr<void> context_;  // the live grpc::ClientContext, so Stop() can cancel it
   std::thread thread_;
   mutable uint64_t next_serial_ = 1;

@@ -4,9 +4,12 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <future>
+#include <limits>
 #include <map>
 #include <set>
 #include <thread>
+#include <utility>
 
 #include <grpcpp/grpcpp.h>
 #include <opencv2/core.hpp>
@@ -15,9 +18,11 @@
 
 #include "ave/net/tls.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "model_store/common/cpu_clock.h"
 #include "model_store/common/log.h"
 #include "model_store/geometry/bvh.h"
+#include "viewer_client/client/replay_video.h"
 #include "model_store/geometry/camera.h"
 #include "viewer_client/client/browse_camera.h"
 #include "viewer_client/client/overlay.h"
@@ -45,14 +50,22 @@ std::string ViewerOptions::Check() const {
   if (width < 64 || height < 64 || width > 8192 || height > 8192) return "size must be 64..8192 pixels per side";
   if (layout != "quad" && layout != "browse") return "layout must be 'quad' or 'browse'";
   if (locked_cameras.size() > 3) return "at most 3 locked cameras";
-  if (headless && snapshot_path.empty() && record_dir.empty() && depth_path.empty()) {
-    return "headless needs --snapshot, --record or --depth";
+  if (headless && snapshot_path.empty() && record_dir.empty() && depth_path.empty() && video_path.empty()) {
+    return "headless needs --snapshot, --record, --depth or --video";
   }
+  if (!video_path.empty() && (!headless || replay_to_ns <= replay_from_ns)) {
+    return "--video needs --headless and --replay-from / --replay-to";
+  }
+  if (!video_path.empty() && !(video_fps >= 1 && video_fps <= 120)) return "--video-fps must be 1 .. 120";
   if (!depth_path.empty() && !headless && snapshot_path.empty()) return "--depth needs --headless or --snapshot";
   if (!(timeout_s > 0)) return "timeout must be > 0";
   if (!(max_rate_hz > 0)) return "max rate must be > 0";
   if (!eye.allFinite() || !target.allFinite() || (eye - target).norm() < 1e-6) return "eye and target must differ";
   if (max_frames < 0) return "frames must be >= 0";
+  if ((replay_from_ns != 0 || replay_to_ns != 0) && replay_to_ns <= replay_from_ns) {
+    return "--replay-to must be after --replay-from";
+  }
+  if (!(replay_rate >= 0.25f && replay_rate <= 16.0f)) return "--replay-rate must be 0.25 .. 16";
   if (!(browse_fov_deg > 5 && browse_fov_deg < 170)) return "browse fov must be in (5, 170) degrees";
   return {};
 }
@@ -210,12 +223,15 @@ class Session {
     const int w = context_.framebuffer_width(), h = context_.framebuffer_height();
     const std::vector<View> first = ComputeViews({}, w, h);
     UpdateSelection(first);
-    for (auto& c : clients_) {
-      c->Start({.camera_ids = options_.camera_filter, .max_rate_hz = options_.max_rate_hz, .include_jpeg = true,
-                .include_lidar_points = state_.lidar_points,
-                .decode_width = renderer_.options().video_layer_width,
-                .decode_height = renderer_.options().video_layer_height});
-    }
+    subscribe_ = {.camera_ids = options_.camera_filter, .max_rate_hz = options_.max_rate_hz, .include_jpeg = true,
+                  .include_lidar_points = state_.lidar_points,
+                  .decode_width = renderer_.options().video_layer_width,
+                  .decode_height = renderer_.options().video_layer_height,
+                  .replay_from_ns = options_.replay_from_ns, .replay_to_ns = options_.replay_to_ns,
+                  .replay_rate = options_.replay_rate};
+    for (auto& c : clients_) c->Start(subscribe_);
+    replaying_ = subscribe_.replay();
+    if (replaying_) state_.replay_status = "replay";
     return absl::OkStatus();
   }
 
@@ -294,7 +310,85 @@ class Session {
 
   // Draws one frame into the context's framebuffer; returns the views drawn. `saved`: the frame
   // goes to a PNG, so the overlay is redrawn if its content changed (no 4 Hz lag in pictures).
+  // The panel's replay controls (issue 18): the clients re-subscribe as a replay from the time
+  // dragged to on the time line (or where a pause left it, or replay_back_s before now), stop where
+  // they are, change rate from where they are, or go back to the start-up subscription.
+  void ApplyReplay() {
+    using Command = OverlayState::ReplayCommand;
+    PollRecordedSpans();
+    Command command = std::exchange(state_.replay_command, Command::kNone);
+    SceneClient& first = *clients_[0];
+    const int64_t now_ns = NowNs();
+    state_.timeline_now_ns = now_ns;
+    if (replaying_ && first.replay_time_ns() > 0) state_.replay_time_ns = first.replay_time_ns();
+    if (command == Command::kNone && replaying_ && !paused_ && panel_replay_ && first.replay_ended() &&
+        first.last_error().empty()) {
+      command = Command::kLive;  // a panel replay runs to the time it was asked at: it caught up
+    }
+    if (command == Command::kNone) {
+      if (replaying_ && !paused_) {
+        state_.replay_status = first.replay_ended()
+                                   ? (first.last_error().empty() ? std::string("replay ended") : first.last_error())
+                                   : absl::StrFormat("%.0f s ago, %gx", (now_ns - first.replay_time_ns()) * 1e-9,
+                                                     state_.replay_rate);
+      }
+      return;
+    }
+    if (command == Command::kPause) {
+      if (!replaying_) return;  // live cannot pause: nothing would say where it stopped
+      for (auto& c : clients_) c->Stop();
+      paused_ = true;
+      state_.replay_status = "paused";
+      return;
+    }
+    if (command == Command::kRate && (!replaying_ || paused_)) return;  // the next play takes it
+    ReplaySeek seek;  // live unless set below
+    if (command == Command::kSeek) {
+      seek = PlanSeek(state_.replay_seek_ns, now_ns, state_.recorded);
+    } else if (command == Command::kPlay || command == Command::kRate) {
+      const bool resume = replaying_ && first.replay_time_ns() > 0 && !first.replay_ended();
+      seek = {.live = false,
+              .from_ns = resume ? first.replay_time_ns() : now_ns - static_cast<int64_t>(state_.replay_back_s * 1e9),
+              .to_ns = now_ns};
+    }
+    SubscribeOptions o = subscribe_;
+    replaying_ = !seek.live;
+    if (replaying_) {
+      o.replay_from_ns = seek.from_ns;
+      o.replay_to_ns = seek.to_ns;
+      o.replay_rate = state_.replay_rate;
+    } else {
+      o.replay_from_ns = o.replay_to_ns = 0;  // live even when started with --replay-*
+    }
+    paused_ = false;
+    panel_replay_ = replaying_;
+    state_.replay_time_ns = replaying_ ? seek.from_ns : 0;
+    for (auto& c : clients_) c->Start(o);
+    state_.replay_status = replaying_ ? "seeking" : "live";
+  }
+
+  // The time line's spans, asked of the first server every 2 s off the render thread; a server
+  // that does not record is asked no more.
+  void PollRecordedSpans() {
+    if (spans_future_.valid()) {
+      if (spans_future_.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return;
+      absl::StatusOr<RecordedSpans> spans = spans_future_.get();
+      if (spans.ok()) {
+        state_.recorded = *std::move(spans);
+      } else if (spans.status().code() == absl::StatusCode::kFailedPrecondition) {
+        spans_off_ = true;
+        state_.replay_status = std::string(spans.status().message());
+      }
+    }
+    const auto now = std::chrono::steady_clock::now();
+    if (spans_off_ || now < next_spans_) return;
+    next_spans_ = now + std::chrono::seconds(2);
+    SceneClient* client = clients_[0].get();
+    spans_future_ = std::async(std::launch::async, [client] { return client->FetchRecordedSpans(); });
+  }
+
   absl::StatusOr<std::vector<View>> Draw(const WindowInput* input, bool saved = false) {
+    ApplyReplay();
     const auto now = std::chrono::steady_clock::now();
     const double dt = std::chrono::duration<double>(now - last_frame_).count();
     last_frame_ = now;
@@ -473,9 +567,17 @@ class Session {
   Overlay* overlay_;
   BrowseCamera browse_;
   OverlayState state_;
+  SubscribeOptions subscribe_;  // the start-up subscription (live, or the --replay-* one)
+  bool replaying_ = false, paused_ = false;  // the panel's replay (issue 18)
+  bool panel_replay_ = false;  // started from the panel (to the time asked): live once it ends
   bool auto_locked_ = false;
   std::optional<DisplayOptions> applied_display_;
   std::vector<std::unique_ptr<SceneClient>> clients_;
+  // The time line's RecordedSpans call in flight (declared after clients_: destroyed first, it
+  // waits for the call that uses clients_[0]).
+  std::future<absl::StatusOr<RecordedSpans>> spans_future_;
+  std::chrono::steady_clock::time_point next_spans_{};
+  bool spans_off_ = false;
   std::vector<Projector> projectors_;
   std::vector<View> last_views_;  // the previous frame's, for the overlay cache
   std::vector<std::pair<std::string, uint64_t>> point_serials_;  // the LiDAR clouds in the renderer
@@ -557,8 +659,20 @@ absl::Status RunViewer(const ViewerOptions& options) {
   Session session(options, *context, **renderer, overlay.get());
   if (absl::Status s = session.Connect(); !s.ok()) return s;
 
+  std::unique_ptr<ReplayVideo> video;
+  if (!options.video_path.empty()) {
+    auto v = ReplayVideo::Open(options.video_path, context->framebuffer_width(), context->framebuffer_height(),
+                               options.video_fps, options.replay_from_ns, options.replay_to_ns);
+    if (!v.ok()) return absl::Status(v.status().code(), absl::StrCat("viewer: ", v.status().message()));
+    video = *std::move(v);
+  }
   int recorded = 0;
   auto after_frame = [&]() -> absl::Status {
+    if (video) {
+      absl::StatusOr<std::vector<uint8_t>> pixels = context->ReadPixels();
+      if (!pixels.ok()) return pixels.status();
+      if (absl::Status s = video->Add(*pixels, session.client(0).replay_time_ns()); !s.ok()) return s;
+    }
     if (options.record_dir.empty()) return absl::OkStatus();
     return SaveFramebuffer(*context, RecordPath(options.record_dir, recorded++));
   };
@@ -577,6 +691,12 @@ absl::Status RunViewer(const ViewerOptions& options) {
       cams = session.Cameras();
       session.UpdateSelection(session.ComputeViews(cams, context->framebuffer_width(), context->framebuffer_height()));
       if (!cams.empty() && with_frames(cams) >= wanted(cams)) break;
+      if (options.replay_to_ns > 0 && session.client(0).replay_ended()) {
+        if (!session.client(0).last_error().empty()) {
+          return absl::NotFoundError("viewer: replay: " + session.client(0).last_error());
+        }
+        break;  // a short replay that ended before every camera showed a frame: draw what it left
+      }
       if (std::chrono::steady_clock::now() >= deadline) {
         std::string missing;
         for (const auto& c : cams)
@@ -588,29 +708,37 @@ absl::Status RunViewer(const ViewerOptions& options) {
       }
       session.client(0).WaitUntil([](const std::vector<CameraView>&) { return false; }, std::chrono::milliseconds(100));
     }
-    const int frames = std::max(1, options.max_frames);
+    // A replay draws until it ends (at most --frames when given); live, --frames frames.
+    const bool replay = options.replay_to_ns > 0;
+    const int frames = replay ? (options.max_frames > 0 ? options.max_frames : std::numeric_limits<int>::max())
+                              : std::max(1, options.max_frames);
     std::vector<View> views;
     double draw_s = 0;  // frames after the first (which compiles shaders and renders every shadow map)
     double cpu_at_second_frame = 0;
     uint64_t decoded_at_second_frame = 0;
+    int drawn_count = 0;
     for (int f = 0; f < frames; ++f) {
+      ++drawn_count;
       if (f == 1) {
         cpu_at_second_frame = ProcessCpuSeconds();
         decoded_at_second_frame = session.jpegs_decoded();
       }
       const auto frame_start = std::chrono::steady_clock::now();
-      absl::StatusOr<std::vector<View>> drawn = session.Draw(nullptr, f + 1 == frames || !options.record_dir.empty());
+      const bool last = f + 1 == frames || (replay && session.client(0).replay_ended());
+      absl::StatusOr<std::vector<View>> drawn =
+          session.Draw(nullptr, last || !options.record_dir.empty() || !options.video_path.empty());
       if (!drawn.ok()) return drawn.status();
       views = *std::move(drawn);
       (void)context->ReadPixels();  // waits for the GPU, so the time is the frame's
       if (f > 0) draw_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - frame_start).count();
       if (absl::Status s = after_frame(); !s.ok()) return s;
+      if (last) break;
       if (f + 1 < frames) std::this_thread::sleep_until(frame_start + std::chrono::microseconds(int64_t(1e6 / options.max_rate_hz)));
     }
-    if (frames > 1) {
-      AVE_LOG(INFO) << "viewer: " << frames - 1 << " frames after the first in " << draw_s << " s ("
-                    << 1e3 * draw_s / (frames - 1) << " ms per frame, read-back included; "
-                    << 1e3 * (ProcessCpuSeconds() - cpu_at_second_frame) / (frames - 1) << " CPU ms per frame, "
+    if (drawn_count > 1) {
+      AVE_LOG(INFO) << "viewer: " << drawn_count - 1 << " frames after the first in " << draw_s << " s ("
+                    << 1e3 * draw_s / (drawn_count - 1) << " ms per frame, read-back included; "
+                    << 1e3 * (ProcessCpuSeconds() - cpu_at_second_frame) / (drawn_count - 1) << " CPU ms per frame, "
                     << session.jpegs_decoded() - decoded_at_second_frame << " JPEG decodes, "
                     << (overlay ? overlay->redraws() : 0) << " overlay redraws); renderer: "
                     << (*renderer)->stats().shadow_map_renders << " shadow-map renders, "
@@ -620,6 +748,12 @@ absl::Status RunViewer(const ViewerOptions& options) {
                     << " hits, " << (*renderer)->stats().view_cache_shadow_tests << " shadow-tested, "
                     << (*renderer)->stats().views_uncached << " uncached views ("
                     << (*renderer)->stats().views_static_from_cache << " with the cached static G-buffer)";
+    }
+    if (video) {
+      absl::StatusOr<int64_t> frames = video->Finish();
+      if (!frames.ok()) return frames.status();
+      AVE_LOG(INFO) << "viewer: wrote " << options.video_path << " (" << *frames << " frames at " << options.video_fps
+                    << " per recorded second)";
     }
     if (!options.snapshot_path.empty()) {
       if (absl::Status s = SaveFramebuffer(*context, options.snapshot_path); !s.ok()) return s;

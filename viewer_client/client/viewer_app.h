@@ -42,6 +42,14 @@ struct ViewerOptions {
   // optional client certificate and key for mutual TLS.
   std::string tls_ca, tls_cert, tls_key, tls_server_name;
   bool insecure_plaintext = false;  // send the token in plaintext to non-loopback servers (issue 14)
+  // Replay (issue 18): show the recorded interval [from, to) (server clock, ns since the Unix
+  // epoch) at replay_rate instead of the live scene; headless, frames are drawn until it ends.
+  int64_t replay_from_ns = 0, replay_to_ns = 0;
+  float replay_rate = 1;
+  // Headless replay: the frames drawn also as a Motion-JPEG video (.mkv or .avi) at the recorded
+  // timing, video_fps frames per recorded second (replay_video.h).
+  std::string video_path;
+  double video_fps = 10;
 
   std::string Check() const;
 };

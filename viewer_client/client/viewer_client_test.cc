@@ -68,6 +68,28 @@ TEST(BrowseCamera, MouseLookTurnsWithoutMovingAndWheelApproachesThePivot) {
   EXPECT_NEAR((zoom.pivot() - zoom.eye()).norm(), 1, 1e-9);
 }
 
+// The time line's seek (issue 18): inside a recorded interval of any camera it starts there, in a
+// gap at the next recorded instant, near now or after everything recorded it is live.
+TEST(PlanSeek, StartsInsideRecordingSkipsGapsAndGoesLiveNearNowOrPastTheRecording) {
+  RecordedSpans spans;
+  spans.cameras.push_back({"cam1", {{100, 200}, {500, 600}}, 10});
+  spans.cameras.push_back({"cam2", {{300, 350}}, 3});
+  constexpr int64_t kNow = 1000, kMargin = 50;
+  auto seek = [&](int64_t t) { return PlanSeek(t, kNow, spans, kMargin); };
+  EXPECT_FALSE(seek(150).live);
+  EXPECT_EQ(seek(150).from_ns, 150);  // inside cam1's first interval
+  EXPECT_EQ(seek(150).to_ns, kNow);
+  EXPECT_EQ(seek(0).from_ns, 100);    // before everything: the first frame
+  EXPECT_EQ(seek(250).from_ns, 300);  // cam1's gap: cam2's interval comes first
+  EXPECT_EQ(seek(340).from_ns, 340);  // inside cam2's only
+  EXPECT_EQ(seek(400).from_ns, 500);  // a gap of both
+  EXPECT_EQ(seek(600).from_ns, 600);  // the last instant recorded
+  EXPECT_TRUE(seek(700).live);        // after everything recorded
+  EXPECT_TRUE(seek(960).live);        // within the margin of now
+  EXPECT_TRUE(PlanSeek(150, kNow, {}, kMargin).live);  // nothing recorded
+  EXPECT_TRUE(PlanSeek(500, 520, spans, kMargin).live);  // the next recorded instant is too near now
+}
+
 TEST(Overlay, ProjectAndPickAndRayAgree) {
   const View view = BrowseView({100, 50, 640, 480}, {0, -80, 60}, {0, 0, 0}, 60);
   const int fb_h = 720;
@@ -141,6 +163,48 @@ TEST(Overlay, PanelAndLabelsAppearHeadless) {
   const int lx = int(label_at->x()), ly = int(label_at->y());
   EXPECT_GT(differs(lx + 6, ly - 16, lx + 40, ly), 100) << "no label right above the camera marker";
   EXPECT_EQ(differs(kW - 60, kH - 40, kW, kH), 0) << "the overlay drew where nothing belongs";
+}
+
+// Issue 18: the panel's time line, drawn headless over the last minute (1 min zoom) of two cameras'
+// recordings; a press at three quarters of its width and a release there is a seek to 45 s after
+// its left end, at most a pixel's worth of time off (and nothing before the release).
+TEST(Overlay, DragOnTheTimeLineSeeksToTheTimeUnderTheCursor) {
+  constexpr int kW = 800, kH = 600;
+  auto context = CreateHeadlessContext(kW, kH);
+  ASSERT_TRUE(context.ok()) << context.status();
+  ASSERT_TRUE((*context)->MakeCurrent().ok());
+  auto overlay = Overlay::Create();
+  ASSERT_TRUE(overlay.ok()) << overlay.status();
+  OverlayState state;
+  state.open_replay = true;
+  state.timeline_zoom = 0;  // 1 min
+  state.timeline_now_ns = 100'000'000'000;
+  state.recorded.cameras.push_back({"camA", {{50'000'000'000, 70'000'000'000}, {80'000'000'000, 99'000'000'000}}, 100});
+  state.recorded.cameras.push_back({"camB", {{45'000'000'000, 99'500'000'000}}, 200});
+  auto frame = [&](const WindowInput* input) {
+    (*context)->BindFramebuffer();
+    (*overlay)->BeginFrame(kW, kH, input, 1.0 / 30);
+    (*overlay)->Panel({}, {}, 0, state);
+    (*overlay)->EndFrame();
+  };
+  frame(nullptr);
+  frame(nullptr);  // the auto-sized panel has its size
+  const auto [x, y, w, h] = state.timeline_rect_px;
+  ASSERT_GT(w, 100.f);
+  ASSERT_GT(h, 4.f);
+  EXPECT_EQ(state.replay_command, OverlayState::ReplayCommand::kNone);
+  WindowInput press;
+  press.cursor_px = Eigen::Vector2d(x + 0.75 * w, y + h / 2);
+  press.left_down = true;
+  press.left_presses = 1;
+  frame(&press);
+  EXPECT_EQ(state.replay_command, OverlayState::ReplayCommand::kNone) << "a seek before the release";
+  WindowInput release;
+  release.cursor_px = press.cursor_px;
+  frame(&release);
+  ASSERT_EQ(state.replay_command, OverlayState::ReplayCommand::kSeek);
+  const double pixel_ns = 60e9 / w;
+  EXPECT_NEAR(static_cast<double>(state.replay_seek_ns), 85e9, 1.5 * pixel_ns);
 }
 
 // Issue 7 performance: the overlay is redrawn into its cache only when its triangles changed, and

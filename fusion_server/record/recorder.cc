@@ -1,0 +1,547 @@
+#include "fusion_server/record/recorder.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <set>
+
+#include "absl/strings/str_cat.h"
+#include "model_store/common/log.h"
+
+namespace ave::record {
+namespace fs = std::filesystem;
+namespace {
+
+bool IsNoSpace(int err) { return err == ENOSPC || err == EFBIG || err == EDQUOT; }
+
+// Writes all of `bytes` at `offset`; on failure returns errno (the caller truncates back).
+int WriteAll(int fd, const std::string& bytes, int64_t offset) {
+  size_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t n = ::pwrite(fd, bytes.data() + done, bytes.size() - done, offset + static_cast<int64_t>(done));
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      return errno;
+    }
+    if (n == 0) return EIO;
+    done += static_cast<size_t>(n);
+  }
+  return 0;
+}
+
+void SyncDir(const fs::path& dir) {
+  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY);
+  if (fd >= 0) {
+    ::fsync(fd);
+    ::close(fd);
+  }
+}
+
+}  // namespace
+
+std::string RecorderOptions::Check() const {
+  if (dir.empty()) return "record dir: must be set";
+  if (max_age.count() < 0) return "retention: must be >= 0 s";
+  if (max_bytes < 0) return "record max bytes: must be >= 0";
+  if (segment_max_bytes < 1024) return "segment_max_bytes: must be at least 1024";
+  if (segment_max_duration.count() <= 0) return "segment_max_duration: must be > 0 s";
+  if (queue_max_items == 0 || queue_max_bytes <= 0) return "queue: bounds must be > 0";
+  if (flush_period.count() <= 0) return "flush_period: must be > 0 ms";
+  return "";
+}
+
+int64_t WallNowNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+absl::StatusOr<std::string> ReadSegmentBytes(const std::string& dir, const std::string& segment_path, int64_t offset,
+                                             int64_t length) {
+  const fs::path path = fs::path(dir) / segment_path;
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) {
+    if (errno == ENOENT) return absl::NotFoundError(absl::StrCat("segment '", path.string(), "' is missing"));
+    return absl::UnavailableError(absl::StrCat("segment '", path.string(), "': ", std::strerror(errno)));
+  }
+  std::string bytes(static_cast<size_t>(length), '\0');
+  size_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t n = ::pread(fd, bytes.data() + done, bytes.size() - done, offset + static_cast<int64_t>(done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) break;
+    done += static_cast<size_t>(n);
+  }
+  ::close(fd);
+  if (done != bytes.size()) {
+    return absl::DataLossError(absl::StrCat("segment '", path.string(), "': ", length, " bytes at offset ", offset,
+                                            " indexed, only ", done, " there"));
+  }
+  return bytes;
+}
+
+Recorder::Recorder(RecorderOptions options, std::unique_ptr<RecordIndex> index)
+    : options_(std::move(options)), index_(std::move(index)) {}
+
+absl::StatusOr<std::unique_ptr<Recorder>> Recorder::Open(const std::string& store_path, RecorderOptions options) {
+  if (std::string why = options.Check(); !why.empty()) return absl::InvalidArgumentError("recorder: " + why);
+  std::error_code ec;
+  fs::create_directories(options.dir, ec);
+  if (ec) return absl::UnavailableError(absl::StrCat("record dir '", options.dir, "': ", ec.message()));
+  auto index = RecordIndex::Open(store_path);
+  if (!index.ok()) return index.status();
+  std::unique_ptr<Recorder> recorder(new Recorder(std::move(options), *std::move(index)));
+  if (absl::Status s = recorder->Repair(); !s.ok()) return s;
+  recorder->thread_ = std::thread([r = recorder.get()] { r->Loop(); });
+  return recorder;
+}
+
+Recorder::~Recorder() {
+  {
+    std::lock_guard lock(mu_);
+    stop_ = true;
+  }
+  wake_.notify_all();
+  if (thread_.joinable()) thread_.join();
+}
+
+int64_t Recorder::NowNs() const {
+  if (options_.clock_ns) return options_.clock_ns();
+  return WallNowNs();
+}
+
+absl::Status Recorder::Repair() {
+  auto segments = index_->Segments();
+  if (!segments.ok()) return segments.status();
+  std::set<fs::path> known;
+  int64_t total = 0;
+  int truncated = 0;
+  for (const SegmentRow& seg : *segments) {
+    const fs::path path = fs::path(options_.dir) / seg.path;
+    known.insert(path.lexically_normal());
+    total += seg.bytes;
+    std::error_code ec;
+    const auto size = fs::file_size(path, ec);
+    if (ec) continue;  // gone: replay reports the gap
+    if (static_cast<int64_t>(size) > seg.bytes) {
+      // Bytes written after the last commit (a crash between write and commit): no row names them.
+      if (::truncate(path.c_str(), seg.bytes) != 0) {
+        return absl::UnavailableError(absl::StrCat("segment '", path.string(), "': cannot truncate to its indexed ",
+                                                   seg.bytes, " bytes: ", std::strerror(errno)));
+      }
+      ++truncated;
+    }
+  }
+  int orphans = 0;
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(options_.dir, ec); !ec && it != fs::recursive_directory_iterator();
+       it.increment(ec)) {
+    if (!it->is_regular_file() || it->path().extension() != ".seg") continue;
+    if (known.count(it->path().lexically_normal())) continue;
+    std::error_code rm;
+    if (fs::remove(it->path(), rm)) ++orphans;  // created after the last commit: nothing indexes it
+  }
+  if (absl::Status s = index_->CloseOpenSegments(); !s.ok()) return s;
+  bytes_on_disk_ = total;
+  AVE_LOG(INFO) << "recording to '" << options_.dir << "': " << segments->size() << " segments (" << total
+                << " bytes) indexed, " << truncated << " tails truncated, " << orphans << " unindexed files removed";
+  return absl::OkStatus();
+}
+
+void Recorder::SubmitFrame(const std::string& sensor_id, std::shared_ptr<const v1::SensorFrame> frame,
+                           int64_t received_ns, int64_t capture_server_ns) {
+  if (frame->metadata_only() || frame->jpeg().empty()) return;  // no image: nothing to replay
+  const int64_t bytes = static_cast<int64_t>(frame->jpeg().size());
+  {
+    std::lock_guard lock(mu_);
+    if (stop_ || queue_.size() >= options_.queue_max_items || queue_bytes_ + bytes > options_.queue_max_bytes) {
+      queue_drops_.fetch_add(1, std::memory_order_relaxed);
+      return;
+    }
+    queue_bytes_ += bytes;
+    queue_.push_back({sensor_id, std::move(frame), nullptr, received_ns, capture_server_ns});
+    ++submitted_;
+  }
+  wake_.notify_one();
+}
+
+void Recorder::SubmitSweep(const std::string& sensor_id, std::shared_ptr<const v1::LidarSweepFrame> sweep,
+                           int64_t received_ns, int64_t capture_server_ns) {
+  {
+    std::lock_guard lock(mu_);
+    if (stop_ || queue_.size() >= options_.queue_max_items) {
+      queue_drops_.fetch_add(1, std::memory_order_relaxed);
+      return;
+    }
+    queue_.push_back({sensor_id, nullptr, std::move(sweep), received_ns, capture_server_ns});
+    ++submitted_;
+  }
+  wake_.notify_one();
+}
+
+void Recorder::NoteSensor(const std::string& sensor_id, std::string camera_bytes) {
+  std::lock_guard lock(mu_);
+  sensors_pending_.emplace_back(sensor_id, std::move(camera_bytes));
+}
+
+void Recorder::Drain() {
+  std::unique_lock lock(mu_);
+  const uint64_t target = submitted_;
+  ++drain_waiters_;
+  wake_.notify_all();
+  // Two flushes after this call: the second began after it, so it saw everything submitted before.
+  const uint64_t flush_target = flushes_ + 2;
+  drained_.wait(lock, [&] { return done_ >= target && flushes_ >= flush_target; });
+  --drain_waiters_;
+}
+
+void Recorder::Loop() {
+  auto next_flush = std::chrono::steady_clock::now() + options_.flush_period;
+  for (;;) {
+    std::deque<Item> items;
+    bool stopping = false, draining = false;
+    {
+      std::unique_lock lock(mu_);
+      wake_.wait_until(lock, next_flush, [&] { return stop_ || !queue_.empty() || drain_waiters_ > 0; });
+      items.swap(queue_);
+      queue_bytes_ = 0;
+      stopping = stop_;
+      draining = drain_waiters_ > 0;
+      batch_.sensors.insert(batch_.sensors.end(), sensors_pending_.begin(), sensors_pending_.end());
+      sensors_pending_.clear();
+    }
+    for (Item& item : items) WriteItem(item);
+    const auto now = std::chrono::steady_clock::now();
+    const bool flush = stopping || draining || now >= next_flush;
+    if (flush) {
+      FlushBatch();
+      // Retention reads every segment row: every 10 s of the recorder's clock, or each flush
+      // while recording is stopped for a full disk (it may free room and lets a frame try again).
+      const int64_t now_ns = NowNs();
+      if (disk_full_.load() || now_ns - last_retention_ns_ >= 10'000'000'000) {
+        last_retention_ns_ = now_ns;
+        RunRetention();
+      }
+      next_flush = now + options_.flush_period;
+    }
+    {
+      std::lock_guard lock(mu_);
+      written_ += items.size();
+      if (flush) {
+        done_ = written_;
+        ++flushes_;
+      }
+    }
+    if (flush) drained_.notify_all();
+    if (stopping) {
+      std::lock_guard lock(mu_);
+      if (queue_.empty()) break;
+    }
+  }
+  for (auto& [id, seg] : open_) CloseSegment(seg);
+  FlushBatch();
+  for (auto& [id, seg] : open_) {
+    if (seg.fd >= 0) ::close(seg.fd);
+  }
+}
+
+void Recorder::SetDiskFull(bool full, const std::string& why) {
+  if (disk_full_.exchange(full) == full) return;
+  if (full) {
+    disk_full_events_.fetch_add(1, std::memory_order_relaxed);
+    AVE_LOG(ERROR) << "recording stopped: " << why << " (live serving continues; retrying every "
+                   << options_.flush_period.count() << " ms)";
+  } else {
+    AVE_LOG(INFO) << "recording resumed: " << why;
+  }
+}
+
+void Recorder::CloseSegment(OpenSegment& seg) {
+  if (seg.row.closed) return;
+  seg.row.closed = true;
+  seg.dirty = true;  // the next commit stores closed = 1
+}
+
+bool Recorder::EnsureRoom(int64_t bytes) {
+  if (options_.max_bytes <= 0) return true;
+  auto total = [&] {
+    int64_t t = bytes_on_disk_.load();
+    for (const auto& [id, seg] : open_) t += seg.written - seg.row.bytes;
+    return t;
+  };
+  if (total() + bytes <= options_.max_bytes) return true;
+  RunRetention(bytes);
+  if (total() + bytes <= options_.max_bytes) return true;
+  // Nothing closed is left to delete: the open segments alone fill the budget. Stop; close them so
+  // that the next retention pass may delete the oldest and recording can resume.
+  SetDiskFull(true, absl::StrCat("recording budget of ", options_.max_bytes, " bytes (--record-max-bytes) is full"));
+  for (auto& [id, seg] : open_) CloseSegment(seg);
+  FlushBatch();
+  for (auto& [id, seg] : open_) ::close(seg.fd);
+  open_.clear();
+  return false;
+}
+
+Recorder::OpenSegment* Recorder::SegmentFor(const std::string& sensor_id, int64_t capture_server_ns, int64_t bytes) {
+  auto it = open_.find(sensor_id);
+  if (it != open_.end()) {
+    OpenSegment& seg = it->second;
+    const bool roll = seg.row.closed || seg.written + bytes > options_.segment_max_bytes ||
+                      capture_server_ns - seg.row.start_ns >= std::chrono::nanoseconds(options_.segment_max_duration).count();
+    if (!roll) return &seg;
+    CloseSegment(seg);
+    FlushBatch();  // sync and commit it (closed) before its descriptor goes
+    ::close(seg.fd);
+    open_.erase(it);
+  }
+  const fs::path sensor_dir = fs::path(options_.dir) / sensor_id;
+  std::error_code ec;
+  const bool created_dir = fs::create_directories(sensor_dir, ec);
+  if (ec) {
+    if (IsNoSpace(ec.value())) SetDiskFull(true, absl::StrCat("cannot create '", sensor_dir.string(), "': ", ec.message()));
+    else write_errors_.fetch_add(1, std::memory_order_relaxed);
+    return nullptr;
+  }
+  if (created_dir) SyncDir(options_.dir);
+  OpenSegment seg;
+  seg.row.sensor_id = sensor_id;
+  seg.row.start_ns = capture_server_ns;
+  seg.row.end_ns = capture_server_ns;
+  int64_t name_ns = capture_server_ns;
+  for (;; ++name_ns) {  // unique even when a camera's clock repeats a start time
+    seg.row.path = absl::StrCat(sensor_id, "/", name_ns, ".seg");
+    seg.fd = ::open((fs::path(options_.dir) / seg.row.path).c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+    if (seg.fd >= 0 || errno != EEXIST) break;
+  }
+  if (seg.fd < 0) {
+    const int err = errno;
+    if (IsNoSpace(err)) SetDiskFull(true, absl::StrCat("cannot create a segment in '", sensor_dir.string(), "': ", std::strerror(err)));
+    else {
+      write_errors_.fetch_add(1, std::memory_order_relaxed);
+      AVE_LOG(ERROR) << "recording: cannot create a segment in '" << sensor_dir.string() << "': " << std::strerror(err);
+    }
+    return nullptr;
+  }
+  SyncDir(sensor_dir);  // the new name survives a power cut once its rows are committed
+  return &open_.emplace(sensor_id, std::move(seg)).first->second;
+}
+
+void Recorder::WriteItem(Item& item) {
+  if (item.sweep) {
+    v1::LidarSweepFrame meta = *item.sweep;
+    meta.clear_foreground();
+    SweepRow row{item.sensor_id, item.sweep->sequence(), item.capture_server_ns, item.received_ns, ""};
+    meta.SerializeToString(&row.meta);
+    batch_.sweeps.push_back(std::move(row));
+    return;
+  }
+  const v1::SensorFrame& frame = *item.frame;
+  const int64_t length = static_cast<int64_t>(frame.jpeg().size());
+  if (disk_full_.load() && !probe_) {
+    disk_full_skips_.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  if (!EnsureRoom(length)) {
+    disk_full_skips_.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  OpenSegment* seg = SegmentFor(item.sensor_id, item.capture_server_ns, length);
+  if (!seg) {
+    disk_full_skips_.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  if (const int err = WriteAll(seg->fd, frame.jpeg(), seg->written); err != 0) {
+    if (::ftruncate(seg->fd, seg->written) != 0) {
+      AVE_LOG(ERROR) << "recording: cannot truncate '" << seg->row.path << "' after a failed write";
+    }
+    probe_ = false;
+    if (IsNoSpace(err)) {
+      SetDiskFull(true, absl::StrCat("disk full writing '", seg->row.path, "': ", std::strerror(err)));
+      disk_full_skips_.fetch_add(1, std::memory_order_relaxed);
+    } else {
+      write_errors_.fetch_add(1, std::memory_order_relaxed);
+      AVE_LOG(ERROR) << "recording: write to '" << seg->row.path << "' failed: " << std::strerror(err);
+    }
+    return;
+  }
+  if (disk_full_.load()) SetDiskFull(false, "a frame fits again");
+  probe_ = false;
+  FrameRow row;
+  row.segment_id = seg->row.id;
+  row.segment_path = seg->row.path;
+  row.sensor_id = item.sensor_id;
+  row.sequence = frame.sequence();
+  row.capture_server_ns = item.capture_server_ns;
+  row.received_ns = item.received_ns;
+  row.offset = seg->written;
+  row.length = length;
+  v1::SensorFrame meta;
+  meta.set_capture_time_ns(frame.capture_time_ns());
+  meta.set_sequence(frame.sequence());
+  if (frame.has_pose()) *meta.mutable_pose() = frame.pose();
+  *meta.mutable_boxes() = frame.boxes();
+  meta.set_clock_offset_ns(frame.clock_offset_ns());
+  meta.SerializeToString(&row.meta);
+  batch_.frames.push_back(std::move(row));
+  seg->written += length;
+  seg->row.end_ns = std::max(seg->row.end_ns, item.capture_server_ns);
+  seg->dirty = true;
+}
+
+uint64_t Recorder::RecordedSequence(const std::string& sensor_id, int64_t since_received_ns) const {
+  std::lock_guard lock(mu_);
+  const auto it = recorded_sequence_.find(sensor_id);
+  if (it == recorded_sequence_.end() || it->second.second < since_received_ns) return 0;
+  return it->second.first;
+}
+
+void Recorder::FlushBatch() {
+  const int64_t now_ns = NowNs();
+  if (options_.objects_source && now_ns - last_objects_ns_ >= std::chrono::nanoseconds(options_.objects_period).count()) {
+    last_objects_ns_ = now_ns;
+    v1::SceneUpdate objects = options_.objects_source();
+    if (objects.objects_size() > 0) {
+      ObjectsRow row{objects.server_time_ns() ? objects.server_time_ns() : now_ns, ""};
+      objects.SerializeToString(&row.objects);
+      batch_.objects.push_back(std::move(row));
+    }
+  }
+  // 1. the bytes on disk (fdatasync), 2. then the rows that point at them (one transaction).
+  std::map<std::string, int64_t> committed_before;
+  for (auto& [id, seg] : open_) {
+    if (!seg.dirty) continue;
+    if (seg.written > seg.row.bytes && ::fdatasync(seg.fd) != 0) {
+      const int err = errno;
+      // The batch's bytes of this segment may not be on disk: drop their rows and the bytes.
+      std::erase_if(batch_.frames, [&](const FrameRow& f) { return f.segment_path == seg.row.path; });
+      if (::ftruncate(seg.fd, seg.row.bytes) != 0) AVE_LOG(ERROR) << "recording: cannot truncate '" << seg.row.path << "'";
+      seg.written = seg.row.bytes;
+      if (IsNoSpace(err)) SetDiskFull(true, absl::StrCat("disk full syncing '", seg.row.path, "': ", std::strerror(err)));
+      else write_errors_.fetch_add(1, std::memory_order_relaxed);
+    }
+    committed_before[seg.row.path] = seg.row.bytes;
+    seg.row.bytes = seg.written;
+    batch_.segments.push_back(&seg.row);
+  }
+  if (batch_.segments.empty() && batch_.frames.empty() && batch_.sweeps.empty() && batch_.objects.empty() &&
+      batch_.sensors.empty()) {
+    return;
+  }
+  const size_t frames = batch_.frames.size(), sweeps = batch_.sweeps.size(), objects = batch_.objects.size();
+  int64_t new_bytes = 0;
+  for (const FrameRow& f : batch_.frames) new_bytes += f.length;
+  if (absl::Status s = index_->Commit(batch_); !s.ok()) {
+    // Unindexed bytes stay in the files; the next commit's rows point past them, a restart cuts them.
+    write_errors_.fetch_add(1, std::memory_order_relaxed);
+    AVE_LOG(ERROR) << "recording: index commit failed (" << frames << " frames lost): " << s.message();
+    for (auto& [id, seg] : open_) {
+      if (auto it = committed_before.find(seg.row.path); it != committed_before.end()) seg.row.bytes = it->second;
+    }
+  } else {
+    commits_.fetch_add(1, std::memory_order_relaxed);
+    frames_recorded_.fetch_add(frames, std::memory_order_relaxed);
+    bytes_recorded_.fetch_add(new_bytes, std::memory_order_relaxed);
+    sweeps_recorded_.fetch_add(sweeps, std::memory_order_relaxed);
+    objects_recorded_.fetch_add(objects, std::memory_order_relaxed);
+    bytes_on_disk_ += new_bytes;
+    // Rows are in arrival order: the last of each sensor is its newest (a restarted agent's
+    // sequence may be lower than an earlier stream's).
+    std::lock_guard lock(mu_);
+    for (const FrameRow& f : batch_.frames) recorded_sequence_[f.sensor_id] = {f.sequence, f.received_ns};
+    for (const SweepRow& w : batch_.sweeps) recorded_sequence_[w.sensor_id] = {w.sequence, w.received_ns};
+  }
+  for (auto& [id, seg] : open_) seg.dirty = false;
+  batch_ = IndexBatch();
+}
+
+void Recorder::RunRetention(int64_t need_bytes) {
+  const int64_t now_ns = NowNs();
+  auto segments = index_->Segments();
+  if (!segments.ok()) {
+    AVE_LOG(ERROR) << "recording retention: " << segments.status().message();
+    return;
+  }
+  const int64_t max_age_ns = std::chrono::nanoseconds(options_.max_age).count();
+  int64_t total = 0;
+  for (const SegmentRow& seg : *segments) total += seg.bytes;
+  std::set<std::string> open_paths;
+  for (const auto& [id, seg] : open_) {
+    open_paths.insert(seg.row.path);  // being written, or closed and not yet committed so
+    total += seg.written - seg.row.bytes;
+  }
+  int64_t oldest_kept_ns = now_ns;
+  for (const SegmentRow& seg : *segments) {  // oldest first
+    const bool deletable = !open_paths.count(seg.path);
+    const bool too_old = max_age_ns > 0 && seg.end_ns < now_ns - max_age_ns;
+    const bool over_budget = options_.max_bytes > 0 && total + need_bytes > options_.max_bytes;
+    if (!deletable || !(too_old || over_budget)) {
+      oldest_kept_ns = std::min(oldest_kept_ns, seg.start_ns);
+      continue;
+    }
+    if (absl::Status s = index_->DeleteSegment(seg.id); !s.ok()) {
+      AVE_LOG(ERROR) << "recording retention: " << s.message();
+      return;
+    }
+    std::error_code ec;
+    fs::remove(fs::path(options_.dir) / seg.path, ec);  // after its rows: a crash leaves an orphan, removed at start
+    total -= seg.bytes;
+    bytes_on_disk_ -= seg.bytes;
+    segments_deleted_.fetch_add(1, std::memory_order_relaxed);
+  }
+  const int64_t metadata_before = max_age_ns > 0 ? std::min(oldest_kept_ns, now_ns - max_age_ns) : oldest_kept_ns;
+  if (max_age_ns > 0 || segments_deleted_.load() > 0) {
+    if (absl::Status s = index_->DeleteMetadataBefore(metadata_before); !s.ok()) {
+      AVE_LOG(ERROR) << "recording retention: " << s.message();
+    }
+  }
+  // A full disk or budget is retried once per flush: the next frame may write again.
+  if (disk_full_.load()) probe_ = true;
+}
+
+RecorderStats Recorder::Stats() const {
+  RecorderStats s;
+  s.frames_recorded = frames_recorded_.load();
+  s.bytes_recorded = bytes_recorded_.load();
+  s.sweeps_recorded = sweeps_recorded_.load();
+  s.objects_recorded = objects_recorded_.load();
+  s.queue_drops = queue_drops_.load();
+  s.disk_full_skips = disk_full_skips_.load();
+  s.disk_full_events = disk_full_events_.load();
+  s.write_errors = write_errors_.load();
+  s.segments_deleted = segments_deleted_.load();
+  s.commits = commits_.load();
+  s.bytes_on_disk = bytes_on_disk_.load();
+  s.disk_full = disk_full_.load();
+  {
+    std::lock_guard lock(mu_);
+    s.queue_items = static_cast<int64_t>(queue_.size());
+  }
+  return s;
+}
+
+void Recorder::RenderPrometheus(std::string& out) const {
+  const RecorderStats s = Stats();
+  auto line = [&](const char* name, const char* type, const char* help, auto value) {
+    absl::StrAppend(&out, "# HELP ", name, " ", help, "\n# TYPE ", name, " ", type, "\n", name, " ", value, "\n");
+  };
+  line("ave_record_frames_total", "counter", "JPEG frames recorded (written, synced and indexed).", s.frames_recorded);
+  line("ave_record_bytes_total", "counter", "JPEG bytes recorded.", s.bytes_recorded);
+  line("ave_record_sweeps_total", "counter", "LiDAR sweeps (tracks) recorded.", s.sweeps_recorded);
+  line("ave_record_objects_total", "counter", "Fused-object snapshots recorded.", s.objects_recorded);
+  line("ave_record_drops_total", "counter", "Frames dropped because the recorder queue was full.", s.queue_drops);
+  line("ave_record_disk_full_skips_total", "counter", "Frames not recorded while the disk or budget was full.",
+       s.disk_full_skips);
+  line("ave_record_disk_full_events_total", "counter", "Times recording stopped for a full disk or budget.",
+       s.disk_full_events);
+  line("ave_record_write_errors_total", "counter", "Frames lost to other write, sync or index errors.", s.write_errors);
+  line("ave_record_segments_deleted_total", "counter", "Segments deleted by retention.", s.segments_deleted);
+  line("ave_record_disk_full", "gauge", "1 while recording is stopped for a full disk or budget.", s.disk_full ? 1 : 0);
+  line("ave_record_bytes_on_disk", "gauge", "Indexed segment bytes on disk.", s.bytes_on_disk);
+  line("ave_record_queue_items", "gauge", "Frames and sweeps waiting for the recorder's writer.", s.queue_items);
+}
+
+}  // namespace ave::record

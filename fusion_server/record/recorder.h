@@ -1,0 +1,168 @@
+#pragma once
+// The server's recorder (issue 18): every accepted camera frame's JPEG, exactly as received, is
+// appended to a per-sensor segment file `<dir>/<sensor>/<start_ns>.seg`; its place (segment,
+// offset, length), capture time on the server clock, pose + covariance and boxes go to the index
+// in the model store (record_index.h). LiDAR sweeps (tracks, no points) and the fused objects (at
+// a bounded rate) go to the index only.
+//
+// Off the ingest path: Submit* only moves a shared pointer into a bounded queue and returns; a
+// writer thread does the I/O. A full queue drops the frame (counted), so a slow disk never slows
+// sensors or live viewers.
+//
+// Crash order: each batch (about every flush_period) is written, fdatasync'd, and only then its
+// rows are committed in one transaction, so a row never points at bytes that are not on disk.
+// Open() truncates each segment back to its last indexed byte and removes segment files the
+// index does not know (written after the last commit).
+//
+// Retention: segments whose newest frame is older than max_age, then the oldest closed segments
+// while the recording exceeds max_bytes, are deleted (rows first, then the file). Full disk
+// (ENOSPC/EFBIG on write or sync, or max_bytes reached with nothing closed left to delete):
+// recording stops cleanly (one log line, ave_record_disk_full 1), frames are counted as skipped,
+// live serving goes on; every flush period the writer runs retention and tries again, and
+// recording resumes (one log line) as soon as a write fits.
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "ave/v1/ave.pb.h"
+#include "fusion_server/record/record_index.h"
+
+namespace ave::record {
+
+struct RecorderOptions {
+  std::string dir;                                   // recording directory (created if missing)
+  std::chrono::seconds max_age{0};                   // retention by age; 0 = keep
+  int64_t max_bytes = 0;                             // segment bytes budget; 0 = the disk's size
+  int64_t segment_max_bytes = 64 << 20;              // roll a segment past this size
+  std::chrono::seconds segment_max_duration{60};     // or when its first frame is this old
+  size_t queue_max_items = 4096;                     // bounded queue: frames/sweeps waiting for the writer
+  int64_t queue_max_bytes = 256 << 20;               // and their JPEG bytes
+  std::chrono::milliseconds flush_period{500};       // write + fdatasync + one commit per period
+  std::chrono::milliseconds objects_period{500};     // fused objects recorded at most this often
+  // The fused objects now (a SceneUpdate holding only objects, server time in server_time_ns);
+  // called on the writer thread once per objects_period. Empty: objects are not recorded.
+  std::function<v1::SceneUpdate()> objects_source;
+  // Wall clock in ns (tests inject one for retention by age); empty = system_clock.
+  std::function<int64_t()> clock_ns;
+
+  std::string Check() const;  // empty when usable, else names the field
+};
+
+struct RecorderStats {
+  uint64_t frames_recorded = 0, bytes_recorded = 0, sweeps_recorded = 0, objects_recorded = 0;
+  uint64_t queue_drops = 0;       // queue full: the writer is behind
+  uint64_t disk_full_skips = 0;   // not recorded while the disk (or budget) was full
+  uint64_t disk_full_events = 0;  // times recording stopped for a full disk
+  uint64_t write_errors = 0;      // other I/O errors (frame skipped)
+  uint64_t segments_deleted = 0;
+  uint64_t commits = 0;
+  int64_t queue_items = 0;
+  int64_t bytes_on_disk = 0;  // committed segment bytes
+  bool disk_full = false;
+};
+
+class Recorder {
+ public:
+  // `store_path`: the model store file (already migrated by store::Store::Open). Repairs segment
+  // tails and orphans (see above), then starts the writer thread.
+  static absl::StatusOr<std::unique_ptr<Recorder>> Open(const std::string& store_path, RecorderOptions options);
+  ~Recorder();  // writes and commits what is queued, then stops
+
+  // Non-blocking. `capture_server_ns` is the frame's capture time on the server clock.
+  void SubmitFrame(const std::string& sensor_id, std::shared_ptr<const v1::SensorFrame> frame, int64_t received_ns,
+                   int64_t capture_server_ns);
+  void SubmitSweep(const std::string& sensor_id, std::shared_ptr<const v1::LidarSweepFrame> sweep, int64_t received_ns,
+                   int64_t capture_server_ns);
+  // The sensor's registry entry (serialized ave.v1.Camera), kept so that it replays after removal.
+  void NoteSensor(const std::string& sensor_id, std::string camera_bytes);
+
+  // The sequence of the newest frame or sweep of `sensor_id` received at or after
+  // `since_received_ns` whose bytes and index row are committed (written, fdatasync'd, then one
+  // transaction); 0 when none. Acks carry it (SensorAck.recorded_sequence).
+  uint64_t RecordedSequence(const std::string& sensor_id, int64_t since_received_ns) const;
+
+  // Blocks until everything submitted before the call is written and committed (or skipped).
+  void Drain();
+  RecorderStats Stats() const;
+  // ave_record_* lines in Prometheus text.
+  void RenderPrometheus(std::string& out) const;
+  const RecorderOptions& options() const { return options_; }
+
+ private:
+  struct Item {
+    std::string sensor_id;
+    std::shared_ptr<const v1::SensorFrame> frame;
+    std::shared_ptr<const v1::LidarSweepFrame> sweep;
+    int64_t received_ns = 0, capture_server_ns = 0;
+  };
+  struct OpenSegment {
+    SegmentRow row;
+    int fd = -1;
+    int64_t written = 0;  // bytes in the file (row.bytes: committed)
+    bool dirty = false;
+  };
+  Recorder(RecorderOptions options, std::unique_ptr<RecordIndex> index);
+  absl::Status Repair();
+  void Loop();
+  void WriteItem(Item& item);
+  void FlushBatch();
+  // Deletes segments past max_age, then the oldest closed ones while the recording plus
+  // `need_bytes` exceeds max_bytes.
+  void RunRetention(int64_t need_bytes = 0);
+  bool EnsureRoom(int64_t bytes);  // false: budget full
+  OpenSegment* SegmentFor(const std::string& sensor_id, int64_t capture_server_ns, int64_t bytes);
+  void CloseSegment(OpenSegment& seg);
+  void SetDiskFull(bool full, const std::string& why);
+  int64_t NowNs() const;
+
+  const RecorderOptions options_;
+  std::unique_ptr<RecordIndex> index_;
+
+  mutable std::mutex mu_;
+  std::condition_variable wake_, drained_;
+  std::deque<Item> queue_;
+  int64_t queue_bytes_ = 0;
+  std::vector<std::pair<std::string, std::string>> sensors_pending_;
+  uint64_t submitted_ = 0, written_ = 0, done_ = 0;  // items; done_: written and committed
+  uint64_t flushes_ = 0;
+  // By sensor: (sequence, received_ns) of the newest frame or sweep committed.
+  std::map<std::string, std::pair<uint64_t, int64_t>> recorded_sequence_;
+  int drain_waiters_ = 0;
+  bool stop_ = false;
+
+  // Writer thread only.
+  std::map<std::string, OpenSegment> open_;  // by sensor
+  IndexBatch batch_;
+  std::vector<SegmentRow> closed_pending_;  // closed since the last commit (their final rows)
+  int64_t last_objects_ns_ = 0;
+  bool probe_ = false;  // while full: the next frame may try to write (set once per flush)
+  int64_t last_retention_ns_ = 0;
+
+  std::atomic<uint64_t> frames_recorded_{0}, bytes_recorded_{0}, sweeps_recorded_{0}, objects_recorded_{0};
+  std::atomic<uint64_t> queue_drops_{0}, disk_full_skips_{0}, disk_full_events_{0}, write_errors_{0};
+  std::atomic<uint64_t> segments_deleted_{0}, commits_{0};
+  std::atomic<int64_t> bytes_on_disk_{0};
+  std::atomic<bool> disk_full_{false};
+  std::thread thread_;
+};
+
+// The server's wall clock (system_clock) in ns: the clock recorded times are on.
+int64_t WallNowNs();
+
+// Reads `length` bytes at `offset` of `<dir>/<segment_path>`: NotFound when the file is gone,
+// DataLoss when it is shorter than the index says.
+absl::StatusOr<std::string> ReadSegmentBytes(const std::string& dir, const std::string& segment_path, int64_t offset,
+                                             int64_t length);
+
+}  // namespace ave::record
