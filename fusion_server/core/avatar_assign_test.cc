@@ -7,6 +7,8 @@
 
 #include <gtest/gtest.h>
 
+#include "fusion_server/core/scene_state.h"
+
 namespace ave {
 namespace {
 
@@ -144,6 +146,46 @@ TEST(AvatarAssign, OptionsCheckNamesTheField) {
   o = {};
   o.standing_speed_mps = std::nan("");
   EXPECT_NE(o.Check().find("standing_speed_mps"), std::string::npos);
+}
+
+// Through the real SceneState: a LiDAR foot track walking north gets the stored sequence, its
+// heading and phase on the wire; before any sequence is stored it gets none.
+TEST(AvatarAssign, SceneState_WalkingPersonCarriesItsAvatarOnTheWire) {
+  SceneState state;
+  CameraEntry lidar;
+  lidar.id = "hdl";
+  lidar.kind = SensorKind::kRotatingLidar;
+  state.UpsertCamera(lidar);
+  const uint64_t session = state.StreamOpened("hdl");
+  const int64_t t0 = 1'000'000'000'000;
+  auto sweep = [&](int f) {
+    auto s = std::make_shared<v1::LidarSweepFrame>();
+    s->set_sequence(f + 1);
+    s->set_capture_time_ns(t0 + f * kStepNs);
+    v1::FootTrack* t = s->add_tracks();
+    t->set_track_id(3);
+    t->mutable_position()->set_x(4.0);
+    t->mutable_position()->set_y(-3.0 + 1.4 * kDt * f);
+    for (float c : {0.01f, 0.0f, 0.01f}) t->add_covariance(c);
+    return s;
+  };
+  ASSERT_TRUE(state.AcceptLidarSweep("hdl", sweep(0), t0, session).ok());
+  ViewerCursor cursor;
+  v1::SceneUpdate update = state.BuildUpdate({}, false, t0, cursor);
+  ASSERT_EQ(update.objects_size(), 1);
+  EXPECT_EQ(update.objects(0).avatar_sequence(), "");  // nothing stored yet: box/cylinder only
+  state.SetAvatarSequences({{"walk", 4, 12, 1.4}});
+  for (int f = 1; f <= 30; ++f) ASSERT_TRUE(state.AcceptLidarSweep("hdl", sweep(f), t0 + f * kStepNs, session).ok());
+  update = state.BuildUpdate({}, false, t0 + 30 * kStepNs, cursor);
+  ASSERT_EQ(update.objects_size(), 1);
+  const v1::DynamicObject& o = update.objects(0);
+  EXPECT_EQ(o.kind(), 1u);  // person
+  EXPECT_EQ(o.avatar_sequence(), "walk");
+  EXPECT_EQ(o.avatar_sequence_version(), 4u);
+  EXPECT_LT(AngleDiff(o.avatar_heading_rad(), M_PI / 2), 0.05);
+  EXPECT_GT(o.avatar_phase_cycles(), 0.0f);
+  EXPECT_LT(o.avatar_phase_cycles(), 1.0f);
+  EXPECT_EQ(o.avatar_placement(), 0u);
 }
 
 }  // namespace
