@@ -80,6 +80,7 @@ struct Renderer::Impl {
   // The passes, in the order a frame draws them.
   std::unique_ptr<ShadowMaps> shadows;
   std::unique_ptr<GbufferPass> gbuffer;
+  std::unique_ptr<internal::AvatarPass> avatars;  // issue 17: instanced, with the dynamic models
   std::unique_ptr<ProjectionPass> projection;
   std::unique_ptr<ShadowVolumePass> shadow_volumes;
   ViewCachePass cache;
@@ -108,7 +109,7 @@ struct Renderer::Impl {
                             const View* output = nullptr);
   double MovingViewScale(const FrameContext& frame, const ViewFrame& seen) const;
   std::vector<Viewport> ModelRects(const View& view) const;
-  SceneLayers layers() const { return SceneLayers{statics, dynamics, sky}; }
+  SceneLayers layers() const { return SceneLayers{statics, dynamics, *avatars, sky}; }
 };
 
 absl::Status Renderer::Impl::Render(const std::vector<View>& views, int w, int h) {
@@ -116,7 +117,7 @@ absl::Status Renderer::Impl::Render(const std::vector<View>& views, int w, int h
   const GLuint target = guard.draw();
   if (absl::Status s = EnsureTargets(w, h); !s.ok()) return s;
   // Shadow maps, only where a projector's pose or the geometry changed.
-  if (absl::Status s = shadows->Update(cameras, statics, dynamics, stats); !s.ok()) return s;
+  if (absl::Status s = shadows->Update(cameras, statics, dynamics, *avatars, stats); !s.ok()) return s;
   // The frame's projector passes, their frustum volumes and the models' shadow volumes.
   const FrameContext frame = BeginFrame();
   reduced_views.clear();
@@ -377,6 +378,7 @@ absl::StatusOr<std::unique_ptr<Renderer>> Renderer::Create(const RendererOptions
   };
   if (absl::Status s = assign(impl->shadows, ShadowMaps::Create(o)); !s.ok()) return s;
   if (absl::Status s = assign(impl->gbuffer, GbufferPass::Create(o)); !s.ok()) return s;
+  if (absl::Status s = assign(impl->avatars, internal::AvatarPass::Create()); !s.ok()) return s;
   if (absl::Status s = assign(impl->projection, ProjectionPass::Create(o, cache_supported, impl->video, *impl->shadows));
       !s.ok()) {
     return s;
@@ -447,6 +449,19 @@ absl::Status Renderer::SetDynamicModels(const std::vector<DynamicModel>& models)
 }
 
 absl::Status Renderer::SetPaths(const std::vector<Polyline>& paths) { return impl_->lines->SetPaths(paths); }
+
+absl::Status Renderer::SetAvatarSequence(const avatar::AvatarSequence& sequence) {
+  if (absl::Status s = impl_->avatars->SetSequence(sequence); !s.ok()) return s;
+  impl_->dynamics.SetAvatarBounds({});  // its instances are gone until SetAvatars
+  return absl::OkStatus();
+}
+
+absl::Status Renderer::SetAvatars(const std::vector<AvatarInstance>& avatars) {
+  const uint64_t before = impl_->avatars->version();
+  if (absl::Status s = impl_->avatars->SetInstances(avatars); !s.ok()) return s;
+  if (impl_->avatars->version() != before) impl_->dynamics.SetAvatarBounds(impl_->avatars->instance_bounds());
+  return absl::OkStatus();
+}
 
 absl::Status Renderer::SetPointCloud(const PointCloud& points) {
   if (absl::Status s = impl_->points->Set(points); !s.ok()) return s;
