@@ -62,6 +62,11 @@ const std::set<std::string>& CoveredFields() {
       "ave.v1.FootTrack.track_id", "ave.v1.FootTrack.position", "ave.v1.FootTrack.velocity_x_mps",
       "ave.v1.FootTrack.velocity_y_mps", "ave.v1.FootTrack.covariance", "ave.v1.FootTrack.age_sweeps",
       "ave.v1.LidarPoints.count", "ave.v1.LidarPoints.packed", "ave.v1.SubscribeRequest.include_lidar_points",
+      // Issue 17: avatar sequences (avatar_service_test.cc, EveryRequestFieldIsRefusedByName).
+      "ave.v1.AvatarSequenceRequest.name", "ave.v1.AvatarSequenceRequest.known_version",
+      "ave.v1.AvatarSequenceChunk.name", "ave.v1.AvatarSequenceChunk.version", "ave.v1.AvatarSequenceChunk.chunk_index",
+      "ave.v1.AvatarSequenceChunk.chunk_count", "ave.v1.AvatarSequenceChunk.total_bytes",
+      "ave.v1.AvatarSequenceChunk.data",
   };
   return fields;
 }
