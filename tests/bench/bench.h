@@ -48,6 +48,10 @@ Runner AddLidarBench(CLI::App& sub);
 // and server time, next to a camera frame of the same scene (lidar_wire_bench.cc).
 Runner AddLidarWireBench(CLI::App& sub);
 
+// `ave-bench avatars` (issue 17): viewer ms per frame for 0..100 walking avatars, cylinders as the
+// peer, PNG of the largest count, JSON with viewer_ms_per_100_avatars (avatar_bench.cc).
+Runner AddAvatarBench(CLI::App& sub);
+
 // Pins the process to one CPU and keeps OpenCV single-threaded, so figures are per core.
 void UseOneCore();
 
