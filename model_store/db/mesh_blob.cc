@@ -5,49 +5,17 @@
 #include <cstring>
 
 #include "absl/status/status.h"
+#include "model_store/common/le_bytes.h"
 
 namespace ave::store {
 namespace {
 
 constexpr char kMagic[4] = {'A', 'V', 'E', 'M'};
 
-template <typename U>
-void PutLe(std::string& out, U v) {
-  for (size_t i = 0; i < sizeof(U); ++i) out.push_back(static_cast<char>((v >> (8 * i)) & 0xFF));
-}
-void PutF32(std::string& out, float f) { PutLe(out, std::bit_cast<uint32_t>(f)); }
-void PutF64(std::string& out, double d) { PutLe(out, std::bit_cast<uint64_t>(d)); }
-
-// Bounds-checked little-endian reader; every Get fails once the blob is exhausted.
-class Reader {
- public:
-  explicit Reader(std::string_view b) : b_(b) {}
-  template <typename U>
-  bool Get(U& v) {
-    if (b_.size() - pos_ < sizeof(U)) return false;
-    v = 0;
-    for (size_t i = 0; i < sizeof(U); ++i) v |= static_cast<U>(static_cast<uint8_t>(b_[pos_ + i])) << (8 * i);
-    pos_ += sizeof(U);
-    return true;
-  }
-  bool GetF32(float& f) {
-    uint32_t u;
-    if (!Get(u)) return false;
-    f = std::bit_cast<float>(u);
-    return true;
-  }
-  bool GetF64(double& d) {
-    uint64_t u;
-    if (!Get(u)) return false;
-    d = std::bit_cast<double>(u);
-    return true;
-  }
-  size_t remaining() const { return b_.size() - pos_; }
-
- private:
-  std::string_view b_;
-  size_t pos_ = 0;
-};
+using bytes::PutF32;
+using bytes::PutF64;
+using bytes::PutLe;
+using Reader = bytes::LeReader;
 
 }  // namespace
 
