@@ -40,6 +40,8 @@ struct AvatarBenchOptions {
   std::string counts = "0,1,10,100";
   int cameras = 3;
   std::string png = "avatars_bench.png";
+  bool model_shadows = true;  // RendererOptions::dynamic_objects_cast_shadows
+  bool view_cache = true;     // RendererOptions::view_cache
 };
 
 struct Walker {
@@ -106,7 +108,10 @@ int Run(const AvatarBenchOptions& o) {
     std::cerr << "ave-bench avatars: " << context.status().message() << "\n";
     return 1;
   }
-  auto made = viewer::Renderer::Create();
+  viewer::RendererOptions renderer_options;
+  renderer_options.dynamic_objects_cast_shadows = o.model_shadows;
+  renderer_options.view_cache = o.view_cache;
+  auto made = viewer::Renderer::Create(renderer_options);
   if (!made.ok()) {
     std::cerr << "ave-bench avatars: " << made.status().message() << "\n";
     return 1;
@@ -263,6 +268,8 @@ Runner AddAvatarBench(CLI::App& sub) {
   sub.add_option("--counts", o->counts, "numbers of people, comma separated")->capture_default_str();
   sub.add_option("--cameras", o->cameras, "campus cameras projecting video")->capture_default_str()->check(CLI::Range(0, 64));
   sub.add_option("--png", o->png, "picture of the largest count (empty: none)")->capture_default_str();
+  sub.add_flag("!--no-model-shadows", o->model_shadows, "people cast no shadows in the projectors' shadow maps");
+  sub.add_flag("!--no-view-cache", o->view_cache, "draw every frame exactly (RendererOptions::view_cache off)");
   // Not pinned to one core: llvmpipe's threads are the software GPU (as ave-bench render).
   return [o] { return Run(*o); };
 }
