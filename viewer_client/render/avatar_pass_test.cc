@@ -111,6 +111,48 @@ TEST_F(AvatarTest, PrivacyExport_NoVideoPixelLandsOnAPerson) {
   EXPECT_GT(renderer_->stats().view_cache_patches, 0u) << "the cached path with model rectangles was taken";
 }
 
+// A crowd over most of a cached view: the view is drawn exactly instead of patched rectangle by
+// rectangle, and the pictures and depth are those of a renderer without the view cache.
+class AvatarCrowdTest : public AvatarTest {
+ protected:
+  RendererOptions Options() const override {
+    RendererOptions options;
+    options.moving_view_scale = 1;
+    return options;
+  }
+};
+
+TEST_F(AvatarCrowdTest, CachedViewFallsBackToExactAndMatchesIt) {
+  RendererOptions exact_options = Options();
+  exact_options.view_cache = false;
+  absl::StatusOr<std::unique_ptr<Renderer>> made = Renderer::Create(exact_options);
+  ASSERT_TRUE(made.ok()) << made.status();
+  std::unique_ptr<Renderer> exact = std::move(*made);
+  ASSERT_TRUE(exact->SetStaticMesh(mesh_).ok());
+  ASSERT_TRUE(exact->SetProjectors({MakeProjector(projector_, image_, 1)}).ok());
+  ASSERT_TRUE(exact->SetAvatarSequence(avatar::MakeProceduralWalk()).ok());
+  viewer_ = Camera{PinholeIntrinsics::FromFov(kWidth, kHeight, 60), LookAt({0, 16, 7}, {6, 5, 1})};
+  RenderViewer();  // the cache is built without people
+  for (int frame = 0; frame < 3; ++frame) {
+    std::vector<AvatarInstance> crowd;
+    for (int k = 0; k < 40; ++k) {
+      crowd.push_back({"procedural-walk", {2.0 + 1.2 * (k % 8) + 0.2 * frame, 3.0 + 1.5 * (k / 8), 0}, 0.3 * k, 0.1 * frame});
+    }
+    for (Renderer* r : {renderer_.get(), exact.get()}) ASSERT_TRUE(r->SetAvatars(crowd).ok());
+    const std::vector<uint8_t> cached = RenderViewer();
+    const std::vector<float> cached_depth = Depth(viewer_);
+    std::swap(renderer_, exact);
+    const std::vector<uint8_t> reference = RenderViewer();
+    const std::vector<float> reference_depth = Depth(viewer_);
+    std::swap(renderer_, exact);
+    const PictureDifference d = Compare(cached, reference);
+    EXPECT_LE(d.max, 3) << "frame " << frame << ": mean " << d.mean;
+    EXPECT_EQ(cached_depth, reference_depth) << "frame " << frame;
+  }
+  EXPECT_GE(renderer_->stats().views_exact_for_models, 3u);
+  exact.reset();
+}
+
 TEST_F(AvatarTest, OneFrameSequenceAndBadInputs) {
   NoVideo();
   ASSERT_TRUE(renderer_->SetAvatarSequence(avatar::MakeProceduralWalk({.frame_count = 1}, "statue")).ok());

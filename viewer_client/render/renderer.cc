@@ -262,6 +262,20 @@ void Renderer::Impl::DrawViewCached(const FrameContext& frame, const std::vector
   } else {
     ++stats.view_cache_hits;
   }
+  // A crowd (issue 17): when the models' rectangles cover much of the view, patching them one by
+  // one (exact passes per rectangle, shadow tests over the cached entries) costs more than drawing
+  // the view exactly once (docs/BENCHMARKS.md "Avatars in the viewer"); the cache is kept for
+  // when they have gone.
+  std::vector<Viewport> rects = ModelRects(view);
+  int64_t covered = 0;
+  for (const Viewport& r : rects) covered += static_cast<int64_t>(r.width) * r.height;
+  if (covered * 3 > static_cast<int64_t>(view.viewport.width) * view.viewport.height || rects.size() > 24) {
+    DrawViewExact(frame, view, seen);
+    entry.patches = {view.viewport};  // the working G-buffer holds the whole view (ReadLinearDepth)
+    entry.last_frame = stats.frames + 1;
+    ++stats.views_exact_for_models;
+    return;
+  }
   // Where a model is in a visible live projector's shadow map, the cached entries are tested
   // against it (only those whose video falls where the models are in that projector's image).
   bool shadowed = false;
@@ -290,7 +304,7 @@ void Renderer::Impl::DrawViewCached(const FrameContext& frame, const std::vector
                      by_entries ? ResolveMode::kMarked : ResolveMode::kInVolumes);
     ++stats.view_cache_shadow_tests;
   }
-  entry.patches = ModelRects(view);
+  entry.patches = std::move(rects);
   entry.last_frame = stats.frames + 1;
   for (const Viewport& r : entry.patches) {
     glScissor(r.x, r.y, r.width, r.height);

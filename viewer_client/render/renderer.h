@@ -280,6 +280,9 @@ struct RenderStats {
   uint64_t views_reduced = 0;  // of those, drawn at reduced resolution (RendererOptions::moving_view_scale)
   // Views drawn in full whose static G-buffer came from their cache (only projectors changed).
   uint64_t views_static_from_cache = 0;
+  // Cached views drawn exactly because the dynamic models' rectangles covered over a third of the
+  // view or numbered over 24 (a crowd: patching them one by one costs more).
+  uint64_t views_exact_for_models = 0;
 };
 
 // Most live projector entries the view cache keeps per pixel (RendererOptions::view_cache_entries).
