@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstddef>
 
+#include "model_store/avatar/avatar_blob.h"
 #include "model_store/geometry/camera.h"
 
 namespace ave::viewer::internal {
@@ -24,21 +25,21 @@ int FrameAt(double phase_cycles, size_t count) {
   return std::min(static_cast<int>(count) - 1, static_cast<int>(wrapped * static_cast<double>(count)));
 }
 
+// avatar_blob.h's check (the contract), then what a texture array needs on this GL.
 std::string CheckSequence(const avatar::AvatarSequence& s) {
-  if (s.frames.empty()) return "has no frames";
+  if (std::string why = avatar::CheckAvatarSequence(s); !why.empty()) return why;
+  GLint max_side = 0, max_layers = 0;
+  glGetIntegerv(GL_MAX_TEXTURE_SIZE, &max_side);
+  glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &max_layers);
+  if (static_cast<GLint>(s.frames.size()) > max_layers) {
+    return "has " + std::to_string(s.frames.size()) + " frames, more than this GL's " + std::to_string(max_layers) +
+           " texture array layers";
+  }
   for (size_t i = 0; i < s.frames.size(); ++i) {
     const avatar::AvatarFrame& f = s.frames[i];
-    const std::string at = "frames[" + std::to_string(i) + "].";
-    const size_t n = f.positions_m.size();
-    if (n == 0 || f.indices.empty() || f.indices.size() % 3 != 0) return at + "indices must hold whole triangles";
-    if (f.normals.size() != n || f.uv.size() != n) return at + "normals and uv must have one entry per position";
-    for (uint32_t index : f.indices)
-      if (index >= n) return at + "indices: " + std::to_string(index) + " is past the " + std::to_string(n) + " positions";
-    for (size_t k = 0; k < n; ++k)
-      if (!f.positions_m[k].allFinite()) return at + "positions_m[" + std::to_string(k) + "] is not finite";
-    if (f.atlas_width <= 0 || f.atlas_height <= 0 || f.atlas_width > 8192 || f.atlas_height > 8192 ||
-        f.atlas_rgb.size() != static_cast<size_t>(f.atlas_width) * f.atlas_height * 3) {
-      return at + "atlas_rgb must hold atlas_width x atlas_height (1..8192 each) RGB pixels";
+    if (f.atlas_width <= 0 || f.atlas_height <= 0 || f.atlas_width > max_side || f.atlas_height > max_side) {
+      return "frames[" + std::to_string(i) + "].atlas is " + std::to_string(f.atlas_width) + "x" +
+             std::to_string(f.atlas_height) + ": the renderer needs 1.." + std::to_string(max_side) + " per side";
     }
   }
   return {};
