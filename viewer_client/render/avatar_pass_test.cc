@@ -153,6 +153,46 @@ TEST_F(AvatarCrowdTest, CachedViewFallsBackToExactAndMatchesIt) {
   exact.reset();
 }
 
+// A crowd seen from farther: its rectangles (squares around each person, not their union) cover
+// under a third of the view, so the cached path draws it: one shadow-tested resolve over every
+// pixel instead of counting 40 people's shadow volumes, and the patches pass by pass. Pictures
+// and depth are those of a renderer without the view cache.
+TEST_F(AvatarCrowdTest, CrowdOnTheCachedPathMatchesExact) {
+  RendererOptions exact_options = Options();
+  exact_options.view_cache = false;
+  absl::StatusOr<std::unique_ptr<Renderer>> made = Renderer::Create(exact_options);
+  ASSERT_TRUE(made.ok()) << made.status();
+  std::unique_ptr<Renderer> exact = std::move(*made);
+  ASSERT_TRUE(exact->SetStaticMesh(mesh_).ok());
+  ASSERT_TRUE(exact->SetProjectors({MakeProjector(projector_, image_, 1)}).ok());
+  ASSERT_TRUE(exact->SetAvatarSequence(avatar::MakeProceduralWalk()).ok());
+  viewer_ = Camera{PinholeIntrinsics::FromFov(kWidth, kHeight, 60), LookAt({-6, 30, 16}, {6, 5, 1})};
+  RenderViewer();  // the cache is built without people
+  const RenderStats built = renderer_->stats();
+  for (int frame = 0; frame < 3; ++frame) {
+    std::vector<AvatarInstance> crowd;
+    for (int k = 0; k < 40; ++k) {
+      crowd.push_back({"procedural-walk", {2.0 + 1.2 * (k % 8) + 0.2 * frame, 3.0 + 1.5 * (k / 8), 0}, 0.3 * k, 0.1 * frame});
+    }
+    for (Renderer* r : {renderer_.get(), exact.get()}) ASSERT_TRUE(r->SetAvatars(crowd).ok());
+    const std::vector<uint8_t> cached = RenderViewer();
+    const std::vector<float> cached_depth = Depth(viewer_);
+    std::swap(renderer_, exact);
+    const std::vector<uint8_t> reference = RenderViewer();
+    const std::vector<float> reference_depth = Depth(viewer_);
+    std::swap(renderer_, exact);
+    const PictureDifference d = Compare(cached, reference);
+    EXPECT_LE(d.max, 3) << "frame " << frame << ": mean " << d.mean;
+    EXPECT_EQ(cached_depth, reference_depth) << "frame " << frame;
+  }
+  const RenderStats after = renderer_->stats();
+  EXPECT_EQ(after.views_exact_for_models, built.views_exact_for_models) << "the crowd took the cached path";
+  EXPECT_EQ(after.view_cache_shadowed_all - built.view_cache_shadowed_all, 3u);
+  EXPECT_EQ(after.view_cache_entry_marks, built.view_cache_entry_marks) << "no shadow volumes counted";
+  EXPECT_GE(after.view_cache_patches, built.view_cache_patches + 3 * 5) << "several runs of squares a frame";
+  exact.reset();
+}
+
 TEST_F(AvatarTest, OneFrameSequenceAndBadInputs) {
   NoVideo();
   ASSERT_TRUE(renderer_->SetAvatarSequence(avatar::MakeProceduralWalk({.frame_count = 1}, "statue")).ok());

@@ -62,6 +62,12 @@ using internal::ViewCache;
 using internal::ViewCachePass;
 using internal::ViewFrame;
 
+// Dynamic models over which a cached view's shadow test runs on every pixel (kShadowedAll) instead
+// of within their shadow volumes.
+constexpr size_t kCrowdModels = 24;
+// Side of the squares that the model rectangles over a cached view are drawn in.
+constexpr int kPatchTilePixels = 8;
+
 struct Renderer::Impl {
   Impl(const RendererOptions& o, bool cache_supported)
       : options(o), sky(options), video(options), cameras(options, clock), cache(options, cache_supported) {}
@@ -104,9 +110,10 @@ struct Renderer::Impl {
   void DrawViewCached(const FrameContext& frame, const std::vector<View>& views, size_t slot, const ViewFrame& seen);
   void BuildViewCache(const FrameContext& frame, const View& view, const ViewFrame& seen, ViewCache& entry);
   // The projector passes of `view` (the working G-buffer holds it) and its resolve into the
-  // target, within the scissor box. output: the view as shown when `view` is a reduced copy of it.
+  // target, within the scissor box (or each of `rects`). output: the view as shown when `view` is
+  // a reduced copy of it.
   void AccumulateAndResolve(const FrameContext& frame, const View& view, const ViewFrame& seen,
-                            const View* output = nullptr);
+                            const View* output = nullptr, const std::vector<Viewport>* rects = nullptr);
   double MovingViewScale(const FrameContext& frame, const ViewFrame& seen) const;
   std::vector<Viewport> ModelRects(const View& view) const;
   SceneLayers layers() const { return SceneLayers{statics, dynamics, *avatars, sky}; }
@@ -212,8 +219,8 @@ void Renderer::Impl::DrawViewExact(const FrameContext& frame, const View& view, 
 }
 
 void Renderer::Impl::AccumulateAndResolve(const FrameContext& frame, const View& view, const ViewFrame& seen,
-                                          const View* output) {
-  projection->Accumulate(frame, view, seen, gbuffer->working());
+                                          const View* output, const std::vector<Viewport>* rects) {
+  projection->Accumulate(frame, view, seen, gbuffer->working(), rects);
   glBindFramebuffer(GL_FRAMEBUFFER, seen.target);
   const internal::GbufferTargets& g = gbuffer->working();
   ResolveSource source;
@@ -227,6 +234,11 @@ void Renderer::Impl::AccumulateAndResolve(const FrameContext& frame, const View&
     glViewport(o.x, o.y, o.width, o.height);
     glScissor(o.x, o.y, o.width, o.height);
     resolve->Resolve(frame, *output, seen.any_live, seen.any_retained, source, ResolveMode::kPlain, &view.viewport);
+  } else if (rects != nullptr) {
+    for (const Viewport& r : *rects) {
+      glScissor(r.x, r.y, r.width, r.height);
+      resolve->Resolve(frame, view, seen.any_live, seen.any_retained, source);
+    }
   } else {
     resolve->Resolve(frame, view, seen.any_live, seen.any_retained, source);
   }
@@ -262,14 +274,13 @@ void Renderer::Impl::DrawViewCached(const FrameContext& frame, const std::vector
   } else {
     ++stats.view_cache_hits;
   }
-  // A crowd (issue 17): when the models' rectangles cover much of the view, patching them one by
-  // one (exact passes per rectangle, shadow tests over the cached entries) costs more than drawing
-  // the view exactly once (docs/BENCHMARKS.md "Avatars in the viewer"); the cache is kept for
-  // when they have gone.
+  // When the models' rectangles cover much of the view, patching them (exact passes per
+  // rectangle, shadow tests over the cached entries) costs more than drawing the view exactly once
+  // (docs/BENCHMARKS.md "Avatars in the viewer"); the cache is kept for when they have gone.
   std::vector<Viewport> rects = ModelRects(view);
   int64_t covered = 0;
   for (const Viewport& r : rects) covered += static_cast<int64_t>(r.width) * r.height;
-  if (covered * 3 > static_cast<int64_t>(view.viewport.width) * view.viewport.height || rects.size() > 24) {
+  if (covered * 3 > static_cast<int64_t>(view.viewport.width) * view.viewport.height) {
     DrawViewExact(frame, view, seen);
     entry.patches = {view.viewport};  // the working G-buffer holds the whole view (ReadLinearDepth)
     entry.last_frame = stats.frames + 1;
@@ -286,10 +297,19 @@ void Renderer::Impl::DrawViewCached(const FrameContext& frame, const std::vector
     if (cameras.slots()[frame.passes[k].layer].shadow.dynamic_has_models) shadowed = true;
   }
   shadowed = shadowed && entry.any_live && options.dynamic_objects_cast_shadows;
+  // A crowd (issue 17): counting every model's shadow volumes in the stencil (each from the model
+  // to the end of its projector's frustum) and then testing the pixels inside them cost more than
+  // testing the entries of every pixel in the resolve itself (ave-bench avatars, 100 people under
+  // 3 cameras: ~160 ms against ~50 ms more than the plain resolve, CPU).
+  const bool crowd = shadowed && dynamics.model_bounds().size() > kCrowdModels;
   glBindFramebuffer(GL_FRAMEBUFFER, seen.target);
   const ResolveSource source = cache.Source(entry);
-  resolve->Resolve(frame, view, entry.any_live, entry.any_retained, source);
-  if (shadowed) {
+  resolve->Resolve(frame, view, entry.any_live, entry.any_retained, source,
+                   crowd ? ResolveMode::kShadowedAll : ResolveMode::kPlain);
+  if (crowd) {
+    ++stats.view_cache_shadow_tests;
+    ++stats.view_cache_shadowed_all;
+  } else if (shadowed) {
     shadow_volumes->Mark(view);
     // Inside the volumes, keep only pixels with an entry the models may hide. That pass runs on
     // every pixel of the view (a shader that discards and writes stencil gets no early stencil
@@ -306,13 +326,21 @@ void Renderer::Impl::DrawViewCached(const FrameContext& frame, const std::vector
   }
   entry.patches = std::move(rects);
   entry.last_frame = stats.frames + 1;
-  for (const Viewport& r : entry.patches) {
-    glScissor(r.x, r.y, r.width, r.height);
-    cache.CopyRect(r, gbuffer->working());
+  if (!entry.patches.empty()) {
+    // The rectangles pass by pass, not one after the other (issue 17): each patch rebound the
+    // G-buffer, accumulation and target framebuffers, and 100 people's patches drawn one by one
+    // cost ~100 CPU ms per frame on llvmpipe (ave-bench avatars).
+    Viewport all = entry.patches.front();
+    for (const Viewport& r : entry.patches) {
+      cache.CopyRect(r, gbuffer->working());
+      all = internal::Union(all, r);
+    }
+    // Every model lies in its own rectangle: one draw within their union writes no pixel outside.
+    glScissor(all.x, all.y, all.width, all.height);
     gbuffer->Bind();
     gbuffer->Draw(view, layers(), /*with_static=*/false, /*with_dynamic=*/true, stats);
-    AccumulateAndResolve(frame, view, seen);
-    ++stats.view_cache_patches;
+    AccumulateAndResolve(frame, view, seen, nullptr, &entry.patches);
+    stats.view_cache_patches += entry.patches.size();
   }
   const Viewport& v = view.viewport;
   glScissor(v.x, v.y, v.width, v.height);
@@ -343,7 +371,7 @@ double Renderer::Impl::MovingViewScale(const FrameContext& frame, const ViewFram
 }
 
 // The screen rectangles of a view around the dynamic models' boxes (drawn exactly over a cached
-// view), merged so that none overlap.
+// view), as disjoint runs of squares that cover them.
 std::vector<Viewport> Renderer::Impl::ModelRects(const View& view) const {
   std::vector<Viewport> rects;
   const Eigen::Matrix4d clip_from_local = view.projection * view.view;
@@ -352,8 +380,10 @@ std::vector<Viewport> Renderer::Impl::ModelRects(const View& view) const {
       rects.push_back(*rect);
     }
   }
-  internal::MergeOverlapping(rects);
-  return rects;
+  // Squares, not merged rectangles: a crowd's rectangles overlap one another and grew into a few
+  // covering most of the view (issue 17, ave-bench avatars: 100 people, 2-3 rectangles over 57% of
+  // it; their squares cover 29%).
+  return internal::CoveringTiles(rects, view.viewport, kPatchTilePixels);
 }
 
 Renderer::Renderer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}

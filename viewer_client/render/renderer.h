@@ -280,8 +280,11 @@ struct RenderStats {
   uint64_t views_reduced = 0;  // of those, drawn at reduced resolution (RendererOptions::moving_view_scale)
   // Views drawn in full whose static G-buffer came from their cache (only projectors changed).
   uint64_t views_static_from_cache = 0;
+  // ... of which tested every pixel's entries in the resolve: a crowd of over 24 models, whose
+  // shadow volumes cost more to count than that.
+  uint64_t view_cache_shadowed_all = 0;
   // Cached views drawn exactly because the dynamic models' rectangles covered over a third of the
-  // view or numbered over 24 (a crowd: patching them one by one costs more).
+  // view (patching them costs more then).
   uint64_t views_exact_for_models = 0;
 };
 

@@ -1,6 +1,7 @@
 #include "viewer_client/render/passes/projector_geometry.h"
 
 #include <algorithm>
+#include <cstdint>
 #include <cmath>
 #include <limits>
 
@@ -243,6 +244,53 @@ void MergeOverlapping(std::vector<Viewport>& rects) {
       }
     }
   }
+}
+
+std::vector<Viewport> CoveringTiles(const std::vector<Viewport>& rects, const Viewport& viewport, int tile) {
+  const int columns = (viewport.width + tile - 1) / tile, rows = (viewport.height + tile - 1) / tile;
+  std::vector<uint8_t> covered(static_cast<size_t>(columns) * rows, 0);
+  for (const Viewport& r : rects) {
+    if (!Overlap(r, viewport)) continue;
+    const Viewport c = Intersection(r, viewport);
+    const int c0 = (c.x - viewport.x) / tile, c1 = (c.x + c.width - 1 - viewport.x) / tile;
+    const int r0 = (c.y - viewport.y) / tile, r1 = (c.y + c.height - 1 - viewport.y) / tile;
+    for (int row = r0; row <= r1; ++row) {
+      std::fill(covered.begin() + row * columns + c0, covered.begin() + row * columns + c1 + 1, 1);
+    }
+  }
+  std::vector<Viewport> out;
+  std::vector<size_t> previous_row, this_row;  // indices into out of the runs ending at the row
+  for (int row = 0; row < rows; ++row) {
+    this_row.clear();
+    for (int col = 0; col < columns;) {
+      if (!covered[row * columns + col]) {
+        ++col;
+        continue;
+      }
+      int end = col;
+      while (end < columns && covered[row * columns + end]) ++end;
+      const int x = viewport.x + col * tile, y = viewport.y + row * tile;
+      const Viewport run{x, y, std::min(end * tile, viewport.width) - col * tile,
+                         std::min((row + 1) * tile, viewport.height) - row * tile};
+      bool joined = false;
+      for (size_t k : previous_row) {
+        Viewport& above = out[k];
+        if (above.x == run.x && above.width == run.width && above.y + above.height == run.y) {
+          above.height += run.height;
+          this_row.push_back(k);
+          joined = true;
+          break;
+        }
+      }
+      if (!joined) {
+        out.push_back(run);
+        this_row.push_back(out.size() - 1);
+      }
+      col = end;
+    }
+    std::swap(previous_row, this_row);
+  }
+  return out;
 }
 
 std::optional<Viewport> BoxesScreenRect(std::span<const Bounds> boxes, const Eigen::Matrix4d& clip_from_local,
