@@ -232,20 +232,6 @@ std::optional<Viewport> ScreenRect(const std::vector<Eigen::Vector4d>& points, c
   return Viewport{ix0, iy0, ix1 - ix0, iy1 - iy0};
 }
 
-void MergeOverlapping(std::vector<Viewport>& rects) {
-  for (bool merged = true; merged;) {
-    merged = false;
-    for (size_t a = 0; a < rects.size() && !merged; ++a) {
-      for (size_t b = a + 1; b < rects.size() && !merged; ++b) {
-        if (!Overlap(rects[a], rects[b])) continue;
-        rects[a] = Union(rects[a], rects[b]);
-        rects.erase(rects.begin() + static_cast<std::ptrdiff_t>(b));
-        merged = true;
-      }
-    }
-  }
-}
-
 std::vector<Viewport> CoveringTiles(const std::vector<Viewport>& rects, const Viewport& viewport, int tile) {
   const int columns = (viewport.width + tile - 1) / tile, rows = (viewport.height + tile - 1) / tile;
   std::vector<uint8_t> covered(static_cast<size_t>(columns) * rows, 0);
