@@ -109,6 +109,8 @@ expect_error "admin --tls-ca missing" "$missing/ca.pem" "${AD[@]}" --tls-ca "$mi
 expect_error "admin env AVE_TLS_CA missing" "$missing/env-ca.pem" env AVE_TLS_CA="$missing/env-ca.pem" "${AD[@]}" list
 expect_error "admin --fov 0" "--fov" "${AD[@]}" add-camera --id c --position 1,2,3 --look-at 4,5,6 --fov 0
 expect_error "admin issue-token --role bad" "--role: root not in" "${AD[@]}" issue-token --role root
+expect_error "admin put-avatar --file missing" "$missing/walk.avseq" "${AD[@]}" put-avatar --file "$missing/walk.avseq"
+expect_error "admin put-avatar --file not an avseq" "$tmp/junk" "${AD[@]}" put-avatar --file "$tmp/junk"
 expect_error "admin --size bad" "--size must be WIDTHxHEIGHT" "${AD[@]}" add-camera --id c --position 1,2,3 --look-at 4,5,6 --size 64x
 expect_error "admin --quaternion bad" "--quaternion" "${AD[@]}" add-camera --id c --position 1,2,3 --quaternion 1,0,0
 V=("$bin/ave-viewer" --server 127.0.0.1:1 --headless --timeout 1)

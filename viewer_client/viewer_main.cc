@@ -63,6 +63,9 @@ int main(int argc, char** argv) {
   app.add_option("--frames", options.max_frames, "window: close after N frames (0 = when closed); headless: draw N frames");
   app.add_flag("!--no-frustums", options.draw_frustums, "do not draw camera frustums");
   app.add_flag("!--no-panel", options.panel, "no on-screen panel or labels");
+  app.add_flag("!--no-avatars", options.avatars, "draw people as boxes/cylinders, not avatars (key v toggles)");
+  app.add_flag("--avatars-only", options.avatars_only,
+               "privacy export: every person as its avatar, no live video projected onto people");
   app.add_flag("!--no-lidar-points", options.lidar_points,
                "start with the LiDAR point layer off (key n; the server then sends no points)");
   app.add_flag("!--no-select", options.select_data,

@@ -1,5 +1,7 @@
 #include "fusion_server/admin/admin_client.h"
 
+#include <algorithm>
+
 #include "fusion_server/core/convert.h"
 
 namespace ave {
@@ -67,6 +69,36 @@ absl::StatusOr<std::vector<v1::TokenInfo>> AdminClient::ListTokens() {
   absl::StatusOr<v1::ListTokensResponse> response = Call(&v1::AdminService::StubInterface::ListTokens, v1::ListTokensRequest());
   if (!response.ok()) return response.status();
   return std::vector<v1::TokenInfo>(response->tokens().begin(), response->tokens().end());
+}
+
+absl::StatusOr<v1::AvatarSequenceInfo> AdminClient::PutAvatarSequence(const std::string& blob, const std::string& name) {
+  constexpr size_t kChunk = 1 << 20;
+  grpc::ClientContext context;
+  context.AddMetadata("authorization", "Bearer " + token_);
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+  v1::AvatarSequenceInfo response;
+  std::unique_ptr<grpc::ClientWriterInterface<v1::AvatarSequenceChunk>> writer =
+      stub_->PutAvatarSequence(&context, &response);
+  const uint32_t count = static_cast<uint32_t>(std::max<size_t>(1, (blob.size() + kChunk - 1) / kChunk));
+  for (uint32_t i = 0; i < count; ++i) {
+    v1::AvatarSequenceChunk chunk;
+    if (i == 0) chunk.set_name(name);
+    chunk.set_chunk_index(i);
+    chunk.set_chunk_count(count);
+    chunk.set_total_bytes(blob.size());
+    chunk.set_data(blob.substr(i * kChunk, kChunk));
+    if (!writer->Write(chunk)) break;  // the server ended the call: Finish says why
+  }
+  writer->WritesDone();
+  if (absl::Status s = FromGrpc(writer->Finish()); !s.ok()) return s;
+  return response;
+}
+
+absl::StatusOr<std::vector<v1::AvatarSequenceInfo>> AdminClient::ListAvatarSequences() {
+  absl::StatusOr<v1::ListAvatarSequencesResponse> response =
+      Call(&v1::AdminService::StubInterface::ListAvatarSequences, v1::ListAvatarSequencesRequest());
+  if (!response.ok()) return response.status();
+  return std::vector<v1::AvatarSequenceInfo>(response->sequences().begin(), response->sequences().end());
 }
 
 v1::Camera CampusCameraRecord(const scene::CameraSpec& spec) {

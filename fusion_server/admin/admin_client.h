@@ -25,6 +25,10 @@ class AdminClient {
                                                     const std::string& label = {});
   absl::Status RevokeToken(const std::string& token_id);
   absl::StatusOr<std::vector<v1::TokenInfo>> ListTokens();
+  // Avatar sequences (issue 17): `blob` in avatar_blob.h's form, sent in 1 MiB chunks; an empty
+  // `name` keeps the blob's own.
+  absl::StatusOr<v1::AvatarSequenceInfo> PutAvatarSequence(const std::string& blob, const std::string& name);
+  absl::StatusOr<std::vector<v1::AvatarSequenceInfo>> ListAvatarSequences();
 
  private:
   // One unary call with the bearer token and a 10 s deadline: the response, or the call's status.

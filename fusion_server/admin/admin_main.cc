@@ -9,6 +9,7 @@
 //   ave-admin issue-token --role sensor --camera cam1   (prints the new token once)
 //   ave-admin revoke-token --id 3f2a9c01b7e4 | list-tokens
 //   ave-admin export --camera cam1 --from T --to T2 --out clip.mkv   (recorded frames, issue 18)
+//   ave-admin put-avatar --file walk.avseq [--name walk] | list-avatars   (issue 17)
 // TLS: --tls-ca ca.pem (and --tls-cert/--tls-key for mutual TLS); env AVE_TLS_CA.
 #include <chrono>
 #include <cmath>
@@ -23,6 +24,7 @@
 #include "fusion_server/admin/admin_client.h"
 #include "fusion_server/admin/export.h"
 #include "fusion_server/core/convert.h"
+#include "model_store/avatar/avatar_blob.h"
 #include "model_store/common/cli.h"
 #include "model_store/scene/intrinsics_file.h"
 
@@ -121,6 +123,11 @@ int main(int argc, char** argv) {
   CLI::App* revoke = app.add_subcommand("revoke-token", "revoke tokens by id (a prefix of the hash, 8+ hex)");
   revoke->add_option("--id", token_id, "token id as issue-token / list-tokens print it")->required();
   app.add_subcommand("list-tokens", "list issued tokens (ids, roles, cameras; never the tokens) as JSON");
+  std::string avatar_file;
+  CLI::App* put_avatar = app.add_subcommand("put-avatar", "store an avatar sequence (.avseq from the studio)");
+  put_avatar->add_option("--file", avatar_file, "the .avseq file")->required();
+  put_avatar->add_option("--name", name, "name to store it under ([A-Za-z0-9_.-]{1,64}; default: the file's own)");
+  app.add_subcommand("list-avatars", "list stored avatar sequences (no blobs) as JSON");
 
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-admin")) return *exit_code;
   absl::StatusOr<std::shared_ptr<grpc::Channel>> channel = ave::net::MakeChannel(server, tls);
@@ -157,6 +164,23 @@ int main(int argc, char** argv) {
     return PrintJsonArray(*tokens);
   }
 
+  if (app.got_subcommand("put-avatar")) {
+    // Read and checked here first, so a bad file is named by its path before anything is sent.
+    absl::StatusOr<ave::avatar::AvatarSequence> sequence = ave::avatar::ReadAvatarSequenceFile(avatar_file);
+    if (!sequence.ok()) return Fail(std::string(sequence.status().message()));
+    absl::StatusOr<std::string> blob = ave::avatar::EncodeAvatarSequence(*sequence, avatar_file);
+    if (!blob.ok()) return Fail(std::string(blob.status().message()));
+    auto info = client.PutAvatarSequence(*blob, name);
+    if (!info.ok()) return Fail(std::string(info.status().message()));
+    std::cout << "stored avatar sequence '" << info->name() << "' version " << info->version() << " ("
+              << info->frame_count() << " frames, " << info->bytes() << " bytes)\n";
+    return 0;
+  }
+  if (app.got_subcommand("list-avatars")) {
+    auto sequences = client.ListAvatarSequences();
+    if (!sequences.ok()) return Fail(std::string(sequences.status().message()));
+    return PrintJsonArray(*sequences);
+  }
   if (app.got_subcommand("list")) {
     auto cameras = client.ListCameras();
     if (!cameras.ok()) return Fail(std::string(cameras.status().message()));

@@ -47,6 +47,7 @@ const char* ActionName(Action action) {
     case Action::kReadModel: return "read the static model";
     case Action::kManageCameras: return "manage cameras";
     case Action::kManageTokens: return "manage tokens";
+    case Action::kManageModels: return "manage stored models";
   }
   return "unknown action";
 }
@@ -139,6 +140,7 @@ absl::Status Authorize(const Principal& who, Action action, const std::string& c
       return deny(": only viewer and admin tokens read scene state");
     case Action::kManageCameras:
     case Action::kManageTokens:
+    case Action::kManageModels:
       if (who.role == Role::kAdmin) return absl::OkStatus();
       return deny(": only admin tokens do");
   }

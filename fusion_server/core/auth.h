@@ -28,7 +28,8 @@ const char* RoleName(Role role);
 absl::StatusOr<Role> ParseRole(const std::string& name);
 
 // What a call may do. Stream names the camera it streams as.
-enum class Action { kStream, kSubscribe, kReadModel, kManageCameras, kManageTokens };
+// kManageModels: store avatar sequences (issue 17) and other models, admin only.
+enum class Action { kStream, kSubscribe, kReadModel, kManageCameras, kManageTokens, kManageModels };
 const char* ActionName(Action action);
 
 struct Principal {

@@ -82,19 +82,21 @@ TEST(Auth, Authorize_EachRoleIsRefusedOutsideItsRights) {
   EXPECT_THAT(std::string(other_camera.message()), HasSubstr("bound to camera 'cam1'"));
   EXPECT_THAT(std::string(other_camera.message()), HasSubstr("'cam2'"));
   EXPECT_TRUE(Authorize(fleet, Action::kStream, "cam9").ok());
-  for (Action a : {Action::kSubscribe, Action::kReadModel, Action::kManageCameras, Action::kManageTokens}) {
+  for (Action a : {Action::kSubscribe, Action::kReadModel, Action::kManageCameras, Action::kManageTokens,
+                   Action::kManageModels}) {
     EXPECT_TRUE(absl::IsPermissionDenied(Authorize(sensor, a))) << ActionName(a);
   }
 
   EXPECT_TRUE(Authorize(viewer, Action::kSubscribe).ok());
   EXPECT_TRUE(Authorize(viewer, Action::kReadModel).ok());
-  for (Action a : {Action::kStream, Action::kManageCameras, Action::kManageTokens}) {
+  for (Action a : {Action::kStream, Action::kManageCameras, Action::kManageTokens, Action::kManageModels}) {
     const absl::Status s = Authorize(viewer, a, "cam1");
     EXPECT_TRUE(absl::IsPermissionDenied(s)) << ActionName(a);
     EXPECT_THAT(std::string(s.message()), HasSubstr("role viewer"));
   }
 
-  for (Action a : {Action::kSubscribe, Action::kReadModel, Action::kManageCameras, Action::kManageTokens}) {
+  for (Action a : {Action::kSubscribe, Action::kReadModel, Action::kManageCameras, Action::kManageTokens,
+                   Action::kManageModels}) {
     EXPECT_TRUE(Authorize(admin, a).ok()) << ActionName(a);
   }
   EXPECT_TRUE(absl::IsPermissionDenied(Authorize(admin, Action::kStream, "cam1")));

@@ -206,6 +206,11 @@ uint64_t ObjectFusion::TiedObject(const std::string& camera_id, uint64_t session
   return it == ties_.end() || !objects_.count(it->second) ? 0 : it->second;
 }
 
+const FusedObject* ObjectFusion::Find(uint64_t id) const {
+  auto it = objects_.find(id);
+  return it == objects_.end() ? nullptr : &it->second;
+}
+
 std::vector<const FusedObject*> ObjectFusion::Live(int64_t now_ns) const {
   std::vector<const FusedObject*> out;
   const int64_t forget_ns = static_cast<int64_t>(options_.forget_s * 1e9);

@@ -82,6 +82,8 @@ class ObjectFusion {
   // Objects seen within forget_s of now_ns.
   std::vector<const FusedObject*> Live(int64_t now_ns) const;
   size_t size() const { return objects_.size(); }
+  // The object with this id, live or not yet expired; nullptr when there is none.
+  const FusedObject* Find(uint64_t id) const;
   // The live object a sensor's track (of a stream session) is tied to now, 0 when none (merges
   // re-point ties, so this follows an object that was merged into another).
   uint64_t TiedObject(const std::string& camera_id, uint64_t session, uint32_t track_id) const;

@@ -143,7 +143,7 @@ absl::Status SceneState::AcceptFrame(const std::string& id, std::shared_ptr<cons
     ++it->second.accepted;
     it->second.latest = frame;
     it->second.latest_received_ns = received_ns;
-    for (const ObjectObservation& observation : placed) objects_.Observe(observation);
+    for (const ObjectObservation& observation : placed) ObserveLocked(observation);
     if (terrain) ExpireObjectsLocked(t_ns);
     BumpLocked();
   }
@@ -157,7 +157,23 @@ void SceneState::ExpireObjectsLocked(int64_t t_ns) {
   if (t_ns - objects_expired_ns_ >= kExpireEveryNs || t_ns < objects_expired_ns_ - 10 * kExpireEveryNs) {
     objects_.Expire(t_ns);
     objects_expired_ns_ = t_ns;
+    std::vector<uint64_t> live;
+    for (const FusedObject* o : objects_.Live(t_ns)) live.push_back(o->id);
+    avatars_.Retain(live);
   }
+}
+
+void SceneState::ObserveLocked(const ObjectObservation& observation) {
+  const uint64_t id = objects_.Observe(observation);
+  // Every object's avatar pose follows it (its kind may settle on person later); only persons'
+  // poses go out (BuildUpdate).
+  if (const FusedObject* o = objects_.Find(id)) avatars_.Update(id, o->position.head<2>(), observation.t_ns, o->heading_rad);
+}
+
+void SceneState::SetAvatarSequences(std::vector<AvatarSequenceInfo> sequences) {
+  std::lock_guard lock(mu_);
+  avatars_.SetSequences(std::move(sequences));
+  BumpLocked();
 }
 
 namespace {
@@ -231,7 +247,7 @@ absl::Status SceneState::AcceptLidarSweep(const std::string& id, std::shared_ptr
     live.latest_sweep = sweep;
     live.latest_received_ns = received_ns;
     live.sweep_session = session;
-    for (const ObjectObservation& observation : observations) objects_.Observe(observation);
+    for (const ObjectObservation& observation : observations) ObserveLocked(observation);
     ExpireObjectsLocked(t_ns);
     BumpLocked();
   }
@@ -439,6 +455,14 @@ void SceneState::BuildUpdate(const std::vector<std::string>& camera_ids, bool in
     for (const auto& c : o->cameras) out->add_camera_ids(c.first);
     out->set_last_seen_ns(o->last_seen_ns);
     out->set_kind(static_cast<uint32_t>(o->kind));
+    const AvatarPose* avatar = o->kind == ObjectKind::kPerson ? avatars_.Find(o->id) : nullptr;
+    if (avatar && !avatar->sequence.empty()) {
+      out->set_avatar_sequence(avatar->sequence);
+      out->set_avatar_sequence_version(static_cast<uint64_t>(avatar->sequence_version));
+      out->set_avatar_phase_cycles(static_cast<float>(avatar->phase_cycles));
+      out->set_avatar_heading_rad(static_cast<float>(avatar->heading_rad));
+      out->set_avatar_placement(avatar->placement);
+    }
   }
   lock.unlock();
   for (const Copy& c : copies) {

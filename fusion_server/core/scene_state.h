@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "absl/status/status.h"
+#include "fusion_server/core/avatar_assign.h"
 #include "fusion_server/core/objects.h"
 #include "fusion_server/core/placement.h"
 #include "fusion_server/core/view_select.h"
@@ -127,6 +128,9 @@ class SceneState {
   void SetTerrain(std::shared_ptr<const TerrainModel> terrain);
   std::shared_ptr<const TerrainModel> terrain() const;
   size_t ObjectCount() const;
+  // Avatars (issue 17): the stored sequences people get (avatar_assign.h). Each person object in
+  // an update then carries its avatar's sequence, phase, smoothed heading and placement count.
+  void SetAvatarSequences(std::vector<AvatarSequenceInfo> sequences);
 
   // Called after every accepted frame with a JPEG / sweep, on the accepting thread and outside the
   // state's lock, with its capture time on the server clock (the object time above): the recorder
@@ -170,6 +174,8 @@ class SceneState {
   void BumpLocked();
   // ObjectFusion::Expire at most ten times a second of object time.
   void ExpireObjectsLocked(int64_t t_ns);
+  // ObjectFusion::Observe, then the object's avatar pose.
+  void ObserveLocked(const ObjectObservation& observation);
   v1::CameraStatus StatusLocked(const Live& live, int64_t now_ns) const;
 
   SceneStateOptions options_;
@@ -178,6 +184,7 @@ class SceneState {
   std::map<std::string, Live> cameras_;
   std::shared_ptr<const TerrainModel> terrain_;
   ObjectFusion objects_;
+  AvatarAssigner avatars_;
   int64_t objects_expired_ns_ = 0;  // object time of the last ObjectFusion::Expire (run <= 10 Hz)
   uint64_t sessions_ = 0;
   FrameObserver frame_observer_;

@@ -69,6 +69,11 @@ const std::set<std::string>& CoveredFields() {
       "ave.v1.ReplayRequest.max_updates", "ave.v1.ReplayRequest.purpose",
       // Issue 18: SceneService.RecordedSpans (RecordedSpansFieldsAreRefusedByName below).
       "ave.v1.RecordedSpansRequest.camera_ids", "ave.v1.RecordedSpansRequest.merge_gap_ns",
+      // Issue 17: avatar sequences (avatar_service_test.cc, EveryRequestFieldIsRefusedByName).
+      "ave.v1.AvatarSequenceRequest.name", "ave.v1.AvatarSequenceRequest.known_version",
+      "ave.v1.AvatarSequenceChunk.name", "ave.v1.AvatarSequenceChunk.version", "ave.v1.AvatarSequenceChunk.chunk_index",
+      "ave.v1.AvatarSequenceChunk.chunk_count", "ave.v1.AvatarSequenceChunk.total_bytes",
+      "ave.v1.AvatarSequenceChunk.data",
   };
   return fields;
 }

@@ -189,6 +189,9 @@ absl::StatusOr<std::unique_ptr<FusionServer>> FusionServer::Start(const ServerOp
     AVE_LOG(WARNING) << "the store holds no static model; viewers will see cameras only";
   }
 
+  // Avatar sequences (issue 17): people get them from the first update on.
+  if (absl::Status s = internal::PublishAvatarSequences(*impl->store, impl->state); !s.ok()) return s;
+
   impl->shared = std::make_unique<internal::ServerShared>(impl->options, impl->state, *impl->store);
   if (!options.record_dir.empty()) {
     if (absl::Status s = StartRecorder(*impl); !s.ok()) return s;

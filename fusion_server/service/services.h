@@ -78,6 +78,8 @@ class SceneServiceImpl final : public v1::SceneService::Service {
   // Issue 18: each camera's recorded intervals (the viewer's time line); index rows only.
   grpc::Status RecordedSpans(grpc::ServerContext* context, const v1::RecordedSpansRequest* request,
                              v1::RecordedSpansResponse* response) override;
+  grpc::Status GetAvatarSequence(grpc::ServerContext* context, const v1::AvatarSequenceRequest* request,
+                                 grpc::ServerWriter<v1::AvatarSequenceChunk>* writer) override;  // avatar_service.cc
 
  private:
   ServerShared& shared_;
@@ -107,6 +109,11 @@ class AdminServiceImpl final : public v1::AdminService::Service {
                            v1::RevokeTokenResponse* response) override;
   grpc::Status ListTokens(grpc::ServerContext* context, const v1::ListTokensRequest* request,
                           v1::ListTokensResponse* response) override;
+  // Avatar sequences (issue 17), in avatar_service.cc.
+  grpc::Status PutAvatarSequence(grpc::ServerContext* context, grpc::ServerReader<v1::AvatarSequenceChunk>* reader,
+                                 v1::AvatarSequenceInfo* response) override;
+  grpc::Status ListAvatarSequences(grpc::ServerContext* context, const v1::ListAvatarSequencesRequest* request,
+                                   v1::ListAvatarSequencesResponse* response) override;
 
  private:
   grpc::Status Upsert(grpc::ServerContext* context, const v1::Camera& camera, bool add, v1::Camera* response);
@@ -127,6 +134,9 @@ grpc::Status SelectionViews(const google::protobuf::RepeatedPtrField<v1::ViewFru
 // Splits a mesh into chunks of at most `max_vertices` vertices with chunk-local indices.
 std::vector<v1::StaticModelChunk> ChunkMesh(const TriangleMesh& mesh, uint64_t version, const std::string& name,
                                             size_t max_vertices = 60000);
+
+// Hands the store's avatar sequences to the scene state (at start and after every put).
+absl::Status PublishAvatarSequences(store::Store& store, SceneState& state);
 
 // Store record <-> wire / scene state.
 v1::Camera ToProto(const store::CameraRecord& record);

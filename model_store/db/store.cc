@@ -10,6 +10,7 @@
 #include <utility>
 
 #include "absl/status/status.h"
+#include "model_store/avatar/avatar_blob.h"
 #include "model_store/db/mesh_blob.h"
 
 namespace ave::store {
@@ -108,6 +109,14 @@ const std::vector<const char*>& Migrations() {
       CREATE INDEX record_objects_time ON record_objects (t_ns);
       CREATE TABLE record_sensors (
         sensor_id TEXT PRIMARY KEY NOT NULL, camera BLOB NOT NULL, updated_ns INTEGER NOT NULL);
+      )sql",
+      // 5 -> 6: avatar sequences (issue 17, i4D §5): one walk cycle per unique name, the blob in
+      // avatar_blob.h's form; the summary columns let a listing skip the (large) blob.
+      R"sql(
+      CREATE TABLE IF NOT EXISTS avatar_sequences (
+        version INTEGER PRIMARY KEY AUTOINCREMENT, name TEXT NOT NULL UNIQUE,
+        frame_count INTEGER NOT NULL, frame_period_s REAL NOT NULL, stride_m REAL NOT NULL,
+        created_at_ns INTEGER NOT NULL, blob BLOB NOT NULL);
       )sql",
   };
   return kSteps;
@@ -763,6 +772,63 @@ absl::StatusOr<std::vector<StoredBuilding>> Store::GetBuildings(int64_t scene_id
     }
   }
   return out;
+}
+
+std::string ValidateAvatarName(const std::string& name) {
+  bool ok = !name.empty() && name.size() <= 64;
+  for (char ch : name) ok = ok && (std::isalnum(static_cast<unsigned char>(ch)) || ch == '_' || ch == '.' || ch == '-');
+  return ok ? std::string() : "avatar sequence name '" + name.substr(0, 80) + "' must match [A-Za-z0-9_.-]{1,64}";
+}
+
+absl::StatusOr<int64_t> Store::PutAvatarSequence(const avatar::AvatarSequence& sequence) {
+  if (std::string why = ValidateAvatarName(sequence.name); !why.empty()) return absl::InvalidArgumentError(why);
+  AVE_ASSIGN_OR_RETURN(blob, avatar::EncodeAvatarSequence(sequence, "avatar sequence '" + sequence.name + "'"));
+  std::lock_guard lock(impl_->mu);
+  AVE_ASSIGN_OR_RETURN(stmt, Stmt::Prepare(*impl_->db,
+                                           "INSERT INTO avatar_sequences (name, frame_count, frame_period_s, stride_m, "
+                                           "created_at_ns, blob) VALUES (?, ?, ?, ?, ?, ?)"));
+  AVE_RETURN_IF_ERROR(stmt.Bind(sequence.name, static_cast<int64_t>(sequence.frames.size()), sequence.frame_period_s,
+                                sequence.stride_m, NowNs(), Blob{blob}));
+  absl::Status s = stmt.Run();
+  if (absl::IsAlreadyExists(s)) return absl::AlreadyExistsError("avatar sequence '" + sequence.name + "' already exists");
+  AVE_RETURN_IF_ERROR(s);
+  return sqlite3_last_insert_rowid(impl_->db->get());
+}
+
+namespace {
+constexpr char kAvatarColumns[] = "version, name, frame_count, frame_period_s, stride_m, created_at_ns, length(blob)";
+AvatarSequenceRecord ReadAvatarRecord(const Stmt& s) {
+  return AvatarSequenceRecord{s.Int(0), s.Text(1), s.Int(2), s.Double(3), s.Double(4), s.Int(5), s.Int(6), {}};
+}
+}  // namespace
+
+absl::StatusOr<std::vector<AvatarSequenceRecord>> Store::ListAvatarSequences() {
+  std::lock_guard lock(impl_->mu);
+  AVE_ASSIGN_OR_RETURN(stmt, Stmt::Prepare(*impl_->db, (std::string("SELECT ") + kAvatarColumns +
+                                                        " FROM avatar_sequences ORDER BY name").c_str()));
+  std::vector<AvatarSequenceRecord> out;
+  for (;;) {
+    AVE_ASSIGN_OR_RETURN(row, stmt.Step());
+    if (!row) return out;
+    out.push_back(ReadAvatarRecord(stmt));
+  }
+}
+
+absl::StatusOr<AvatarSequenceRecord> Store::GetAvatarSequenceBlob(const std::string& name) {
+  std::lock_guard lock(impl_->mu);
+  AVE_ASSIGN_OR_RETURN(stmt, Stmt::Prepare(*impl_->db, (std::string("SELECT ") + kAvatarColumns +
+                                                        ", blob FROM avatar_sequences WHERE name = ?").c_str()));
+  AVE_RETURN_IF_ERROR(stmt.Bind(name));
+  AVE_ASSIGN_OR_RETURN(row, stmt.Step());
+  if (!row) return absl::NotFoundError("avatar sequence '" + name + "' not found");
+  AvatarSequenceRecord record = ReadAvatarRecord(stmt);
+  record.blob = std::string(stmt.BlobAt(7));
+  return record;
+}
+
+absl::StatusOr<avatar::AvatarSequence> Store::GetAvatarSequence(const std::string& name) {
+  AVE_ASSIGN_OR_RETURN(record, GetAvatarSequenceBlob(name));
+  return avatar::DecodeAvatarSequence(record.blob, "model store '" + path() + "': avatar_sequences row '" + name + "'");
 }
 
 }  // namespace ave::store

@@ -1,6 +1,6 @@
 #pragma once
-// The model store: cameras, versioned static scene meshes, an append-only audit log and LiDAR-built
-// scenes (terrain tiles, buildings, provenance) in one
+// The model store: cameras, versioned static scene meshes, an append-only audit log, LiDAR-built
+// scenes (terrain tiles, buildings, provenance) and avatar sequences in one
 // SQLite file (MISSION part A). SQLite stays behind this interface; callers see absl::Status.
 //
 // File layout: see the migration list in store.cc. Doubles are stored as SQLite REAL (IEEE-754
@@ -14,6 +14,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "model_store/avatar/avatar_sequence.h"
 #include "model_store/geometry/camera.h"
 #include "model_store/geometry/mesh.h"
 #include "model_store/geometry/rigid3.h"
@@ -103,6 +104,22 @@ struct StoredBuilding {
   std::vector<PrimitiveRecord> parts;  // main part first
 };
 
+// An avatar sequence as stored (issue 17, schema v5): `version` is its row id (strictly increasing,
+// never reused), so a viewer that cached (name, version) knows when a name was stored anew. `blob`
+// (avatar_blob.h's encoding) is filled by GetAvatarSequenceBlob only.
+struct AvatarSequenceRecord {
+  int64_t version = 0;
+  std::string name;
+  int64_t frame_count = 0;
+  double frame_period_s = 0, stride_m = 0;
+  int64_t created_at_ns = 0;
+  int64_t blob_bytes = 0;
+  std::string blob;
+};
+
+// Empty when `name` may name an avatar sequence ([A-Za-z0-9_.-]{1,64}); else the reason, naming it.
+std::string ValidateAvatarName(const std::string& name);
+
 // Empty when the record may be stored; otherwise names the camera and the first bad field, e.g.
 // "camera 'gate-1': intrinsics.fx must be finite and > 0". A rotation with |1 - |q|| <= 1e-3 is
 // accepted (and normalised when stored); further from unit, or non-finite, is rejected.
@@ -154,6 +171,15 @@ class Store {
   absl::StatusOr<std::vector<SceneRecord>> ListScenes();  // oldest first
   absl::StatusOr<std::vector<TerrainTileRecord>> GetTerrainTiles(int64_t scene_id);
   absl::StatusOr<std::vector<StoredBuilding>> GetBuildings(int64_t scene_id);  // by building_id, parts in order
+
+  // Avatar sequences (issue 17). Put: InvalidArgument naming the name or the frame and field
+  // (avatar_blob.h CheckAvatarSequence), AlreadyExists for a taken name; returns the version.
+  absl::StatusOr<int64_t> PutAvatarSequence(const avatar::AvatarSequence& sequence);
+  absl::StatusOr<std::vector<AvatarSequenceRecord>> ListAvatarSequences();  // by name, without blobs
+  // NotFound naming the name. The blob is returned as stored (the server sends it to viewers as is).
+  absl::StatusOr<AvatarSequenceRecord> GetAvatarSequenceBlob(const std::string& name);
+  // Decoded; DataLoss naming the store and row when the blob is corrupt.
+  absl::StatusOr<avatar::AvatarSequence> GetAvatarSequence(const std::string& name);
 
  private:
   class Impl;

@@ -55,6 +55,9 @@ Runner AddStudioBench(CLI::App& sub);
 // `ave-bench record` (issue 18): server CPU with recording on vs off under ave-loadgen's load, MB/s
 // written, recorder drops, seek and replay start-up latency, index bytes per hour (record_bench.cc).
 Runner AddRecordBench(CLI::App& sub);
+// `ave-bench avatars` (issue 17): viewer ms per frame for 0..100 walking avatars, cylinders as the
+// peer, PNG of the largest count, JSON with viewer_ms_per_100_avatars (avatar_bench.cc).
+Runner AddAvatarBench(CLI::App& sub);
 
 // Pins the process to one CPU and keeps OpenCV single-threaded, so figures are per core.
 void UseOneCore();

@@ -21,6 +21,7 @@ int main(int argc, char** argv) {
   runners["environment"] = ave::bench::AddEnvironmentBench(*app.add_subcommand("environment", "i4D environment from a rotating LiDAR: ms per stage vs frames, wall and vegetation accuracy"));
   runners["lidar-decode"] = ave::bench::AddLidarDecodeBench(*app.add_subcommand("lidar-decode", "Velodyne pcap source: sweeps/s, points/s, realtime factor, libpcap peer, RSS over a long replay"));
   runners["lidar"] = ave::bench::AddLidarBench(*app.add_subcommand("lidar", "LiDAR people tracking: foreground P/R, MOTA, ID switches per chain vs ms per sweep, MOG2 peer"));
+  runners["avatars"] = ave::bench::AddAvatarBench(*app.add_subcommand("avatars", "viewer: ms per frame for 0, 1, 10, 100 walking avatars (cylinders as the peer), PNG, viewer_ms_per_100_avatars"));
   runners["lidar-wire"] = ave::bench::AddLidarWireBench(*app.add_subcommand("lidar-wire", "rotating LiDAR stream: bytes and server us per sweep (tracks, points) next to a camera frame"));
   runners["record"] = ave::bench::AddRecordBench(*app.add_subcommand("record", "recording: server CPU with vs without, MB/s, drops, seek and replay start-up latency, index size"));
   runners["studio"] = ave::bench::AddStudioBench(*app.add_subcommand("studio", "4D studio: silhouette and volume IoU, Chamfer, texture error per voxel size vs ms per frame set, peers"));

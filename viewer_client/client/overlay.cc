@@ -427,6 +427,7 @@ void Overlay::Panel(const std::vector<CameraView>& cameras, const OverlayStats& 
     ImGui::Checkbox("labels", &state.annotations);
     ImGui::Checkbox("data selection (frames in view only)", &state.select_data);
     if (!lidars.empty()) ImGui::Checkbox("LiDAR points (by track)", &state.lidar_points);
+    if (!state.avatars_locked) ImGui::Checkbox("people as avatars (v)", &state.avatars);
   }
   if (ImGui::CollapsingHeader("Cameras", ImGuiTreeNodeFlags_DefaultOpen)) {
     // One row per camera: status dot, name (click: select), lock buttons, and its time line (one

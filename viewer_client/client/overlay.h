@@ -31,6 +31,10 @@ struct OverlayState {
   // The LiDARs' newest sweep of people points, coloured by track (issue 16); the subscription asks
   // for points only while this is on. The toggle shows once a LiDAR is registered.
   bool lidar_points = true;
+  // People (kind person) as their server-assigned avatars (issue 17) instead of boxes/cylinders;
+  // key v. Locked on by --avatars-only.
+  bool avatars = true;
+  bool avatars_locked = false;
   std::string selected_camera;                  // highlighted in every view
   std::array<std::string, 3> locked;            // cameras of the three locked views ("" = plan view)
   // Replay (issue 18), the panel's "Replay" section: a time line of each camera's recorded

@@ -1,3 +1,4 @@
+#include "model_store/avatar/avatar_blob.h"
 #include "viewer_client/client/scene_client.h"
 
 #include <algorithm>
@@ -93,6 +94,38 @@ SceneClient::SceneClient(std::shared_ptr<grpc::Channel> channel, std::string vie
     : channel_(std::move(channel)), token_(std::move(viewer_token)), viewer_id_(std::move(viewer_id)) {}
 
 SceneClient::~SceneClient() { Stop(); }
+
+absl::StatusOr<avatar::AvatarSequence> SceneClient::FetchAvatarSequence(const std::string& name, uint64_t* version) {
+  auto stub = v1::SceneService::NewStub(channel_);
+  grpc::ClientContext context;
+  context.AddMetadata("authorization", "Bearer " + token_);
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+  v1::AvatarSequenceRequest request;
+  request.set_name(name);
+  auto reader = stub->GetAvatarSequence(&context, request);
+  const std::string what = "avatar sequence '" + name + "'";
+  std::string blob;
+  v1::AvatarSequenceChunk chunk;
+  uint32_t expected = 0, count = 0;
+  while (reader->Read(&chunk)) {
+    if (chunk.chunk_index() != expected) {
+      return absl::DataLossError(absl::StrCat(what, ": chunk ", chunk.chunk_index(), " arrived, expected ", expected));
+    }
+    if (blob.size() + chunk.data().size() > chunk.total_bytes()) {
+      return absl::DataLossError(absl::StrCat(what, ": more bytes than total_bytes ", chunk.total_bytes()));
+    }
+    blob += chunk.data();
+    count = chunk.chunk_count();
+    if (version) *version = chunk.version();
+    ++expected;
+  }
+  const grpc::Status status = reader->Finish();
+  if (!status.ok()) return absl::Status(static_cast<absl::StatusCode>(status.error_code()), what + ": " + status.error_message());
+  if (expected == 0 || expected != count) {
+    return absl::DataLossError(absl::StrCat(what, ": ", expected, " of ", count, " chunks arrived"));
+  }
+  return avatar::DecodeAvatarSequence(blob, what);
+}
 
 absl::StatusOr<TriangleMesh> SceneClient::FetchStaticModel(uint64_t* version) {
   auto stub = v1::SceneService::NewStub(channel_);
@@ -432,6 +465,10 @@ void SceneClient::Loop(SubscribeOptions options) {
           ov.source_camera_id = o.source_camera_id();
           ov.sensor_ids.assign(o.camera_ids().begin(), o.camera_ids().end());
           for (const auto& p : o.path()) ov.path.emplace_back(p.x(), p.y(), p.z());
+          ov.avatar_sequence = o.avatar_sequence();
+          ov.avatar_version = o.avatar_sequence_version();
+          ov.avatar_phase_cycles = o.avatar_phase_cycles();
+          ov.avatar_heading_rad = o.avatar_heading_rad();
           objects_.push_back(std::move(ov));
         }
       }

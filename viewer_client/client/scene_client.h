@@ -16,6 +16,7 @@
 #include <thread>
 #include <vector>
 
+#include "model_store/avatar/avatar_sequence.h"
 #include "absl/status/statusor.h"
 #include "model_store/geometry/camera.h"
 #include "model_store/geometry/mesh.h"
@@ -69,6 +70,11 @@ struct ObjectView {
   std::vector<Eigen::Vector3d> path;  // oldest first
   std::string source_camera_id;
   std::vector<std::string> sensor_ids;  // every camera or LiDAR observing it (DynamicObject.camera_ids)
+  // A person's avatar (issue 17): empty sequence when the server holds none.
+  std::string avatar_sequence;
+  uint64_t avatar_version = 0;
+  double avatar_phase_cycles = 0;
+  double avatar_heading_rad = 0;
 };
 
 // A registered rotating LiDAR (issue 16; wire LidarState): not a camera, nothing to project. The
@@ -158,6 +164,9 @@ class SceneClient {
 
   // The newest static model (all chunks merged), with its version.
   absl::StatusOr<TriangleMesh> FetchStaticModel(uint64_t* version = nullptr);
+  // An avatar sequence by name (issue 17), fetched whole (its chunks) and decoded; `version`
+  // receives the store's version of it. Errors name the sequence.
+  absl::StatusOr<avatar::AvatarSequence> FetchAvatarSequence(const std::string& name, uint64_t* version = nullptr);
 
   // Each camera's recorded intervals (all cameras when `camera_ids` is empty); the server must
   // record. Segments closer than 2 s are one interval.

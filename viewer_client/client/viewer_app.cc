@@ -179,7 +179,8 @@ DynamicModel ToModel(const ObjectView& o) {
 
 bool SameDisplay(const DisplayOptions& a, const DisplayOptions& b) {
   return a.overlap == b.overlap && a.seam_feather == b.seam_feather &&
-         a.retention_half_life_s == b.retention_half_life_s && a.tint_by_age == b.tint_by_age && a.sky == b.sky;
+         a.retention_half_life_s == b.retention_half_life_s && a.tint_by_age == b.tint_by_age && a.sky == b.sky &&
+         a.video_on_people == b.video_on_people;
 }
 
 // One run of the viewer: the servers' clients, the renderer, the overlay and what the user set.
@@ -191,8 +192,11 @@ class Session {
     state_.frustums = options.draw_frustums;
     state_.select_data = options.select_data;
     state_.lidar_points = options.lidar_points;
+    state_.avatars = options.avatars || options.avatars_only;
+    state_.avatars_locked = options.avatars_only;
     state_.selected_camera = options.selected_camera;
     state_.display = renderer.options().display;
+    if (options.avatars_only) state_.display.video_on_people = false;
     for (size_t i = 0; i < options.locked_cameras.size() && i < 3; ++i) state_.locked[i] = options.locked_cameras[i];
     browse_.set_speed(20);
   }
@@ -404,17 +408,28 @@ class Session {
         if (c.id == id) c.status = CameraLiveness::kStale;
     }
     std::vector<ObjectView> objects;
-    for (auto& c : clients_) {
-      std::vector<ObjectView> o = c->Objects();
-      objects.insert(objects.end(), o.begin(), o.end());
-    }
     std::vector<DynamicModel> models;
+    std::vector<AvatarInstance> avatars;
     std::vector<Polyline> paths;
-    for (const ObjectView& o : objects) {
-      models.push_back(ToModel(o));
-      if (o.path.size() > 1) paths.push_back({o.path, Eigen::Vector3f(1.0f, 0.5f, 0.15f)});
+    for (auto& c : clients_) {
+      for (ObjectView& o : c->Objects()) {
+        if (o.path.size() > 1) paths.push_back({o.path, Eigen::Vector3f(1.0f, 0.5f, 0.15f)});
+        absl::StatusOr<bool> avatar = state_.avatars && o.kind == 1 ? LoadAvatar(*c, o) : false;
+        if (!avatar.ok()) return avatar.status();
+        if (*avatar) {
+          avatars.push_back({o.avatar_sequence, o.position, o.avatar_heading_rad, o.avatar_phase_cycles});
+        } else if (options_.avatars_only && o.kind == 1) {
+          return absl::FailedPreconditionError(
+              "--avatars-only: person " + std::to_string(o.id) +
+              " has no avatar (the server holds no avatar sequence: ave-admin put-avatar --file F.avseq)");
+        } else {
+          models.push_back(ToModel(o));
+        }
+        objects.push_back(std::move(o));
+      }
     }
     if (absl::Status s = renderer_.SetDynamicModels(models); !s.ok()) return s;
+    if (absl::Status s = renderer_.SetAvatars(avatars); !s.ok()) return s;
     if (absl::Status s = renderer_.SetPaths(paths); !s.ok()) return s;
     const std::vector<LidarView> lidars = Lidars();
     if (absl::Status s = UpdatePoints(lidars); !s.ok()) return s;
@@ -481,6 +496,7 @@ class Session {
       if (c == 't') state_.display.tint_by_age = !state_.display.tint_by_age;
       if (c == 'k') state_.paths = !state_.paths;
       if (c == 'n') state_.lidar_points = !state_.lidar_points;
+      if (c == 'v' && !state_.avatars_locked) state_.avatars = !state_.avatars;
       if (c >= '1' && c <= '9' && size_t(c - '1') < cams.size()) state_.selected_camera = cams[c - '1'].id;
       if (c == '0') state_.selected_camera.clear();
     }
@@ -495,6 +511,23 @@ class Session {
   SceneClient& client(size_t i) { return *clients_[i]; }
 
  private:
+  // Whether `o`'s avatar can be drawn: its sequence is fetched (once per name and version, from
+  // the server that sent the object) and given to the renderer. false: the server assigned none.
+  absl::StatusOr<bool> LoadAvatar(SceneClient& client, const ObjectView& o) {
+    if (o.avatar_sequence.empty()) return false;
+    auto it = avatar_versions_.find(o.avatar_sequence);
+    if (it != avatar_versions_.end() && it->second >= o.avatar_version) return true;
+    uint64_t version = 0;
+    absl::StatusOr<avatar::AvatarSequence> sequence = client.FetchAvatarSequence(o.avatar_sequence, &version);
+    if (!sequence.ok()) return sequence.status();
+    sequence->name = o.avatar_sequence;
+    if (absl::Status s = renderer_.SetAvatarSequence(*sequence); !s.ok()) return s;
+    avatar_versions_[o.avatar_sequence] = version;
+    AVE_LOG(INFO) << "avatar sequence '" << o.avatar_sequence << "' version " << version << ": "
+                  << sequence->frames.size() << " frames";
+    return true;
+  }
+  std::map<std::string, uint64_t> avatar_versions_;  // sequences given to the renderer
   OverlayStats Stats(const std::vector<CameraView>& cams, double dt) {
     OverlayStats s;
     if (dt > 0 && frames_ > 0) fps_ = fps_ == 0 ? 1 / dt : 0.9 * fps_ + 0.1 / dt;  // frame 0's dt is start-up

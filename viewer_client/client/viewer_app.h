@@ -37,6 +37,10 @@ struct ViewerOptions {
   bool panel = true;        // the on-screen panel and annotations (ImGui)
   bool select_data = true;  // data selection: frames only of cameras whose frustum meets a view
   bool lidar_points = true;  // the LiDAR point layer (key n) at start; off: no points subscribed
+  bool avatars = true;       // people as avatars (key v) at start, where the server assigns them
+  // The privacy export (issue 17): every person drawn as its avatar with its own texture and no
+  // projected video on people; a person without an avatar ends the run with an error.
+  bool avatars_only = false;
   int max_frames = 0;  // window: close after this many frames (0 = until the user closes it); headless: frames to draw (0 = 1)
   // TLS to the server (issue 8): PEM CA of the server certificate (empty = plaintext), and an
   // optional client certificate and key for mutual TLS.

@@ -62,6 +62,12 @@ using internal::ViewCache;
 using internal::ViewCachePass;
 using internal::ViewFrame;
 
+// Dynamic models over which a cached view's shadow test runs on every pixel (kShadowedAll) instead
+// of within their shadow volumes.
+constexpr size_t kCrowdModels = 24;
+// Side of the squares that the model rectangles over a cached view are drawn in.
+constexpr int kPatchTilePixels = 8;
+
 struct Renderer::Impl {
   Impl(const RendererOptions& o, bool cache_supported)
       : options(o), sky(options), video(options), cameras(options, clock), cache(options, cache_supported) {}
@@ -80,6 +86,7 @@ struct Renderer::Impl {
   // The passes, in the order a frame draws them.
   std::unique_ptr<ShadowMaps> shadows;
   std::unique_ptr<GbufferPass> gbuffer;
+  std::unique_ptr<internal::AvatarPass> avatars;  // issue 17: instanced, with the dynamic models
   std::unique_ptr<ProjectionPass> projection;
   std::unique_ptr<ShadowVolumePass> shadow_volumes;
   ViewCachePass cache;
@@ -103,12 +110,13 @@ struct Renderer::Impl {
   void DrawViewCached(const FrameContext& frame, const std::vector<View>& views, size_t slot, const ViewFrame& seen);
   void BuildViewCache(const FrameContext& frame, const View& view, const ViewFrame& seen, ViewCache& entry);
   // The projector passes of `view` (the working G-buffer holds it) and its resolve into the
-  // target, within the scissor box. output: the view as shown when `view` is a reduced copy of it.
+  // target, within the scissor box (or each of `rects`). output: the view as shown when `view` is
+  // a reduced copy of it.
   void AccumulateAndResolve(const FrameContext& frame, const View& view, const ViewFrame& seen,
-                            const View* output = nullptr);
+                            const View* output = nullptr, const std::vector<Viewport>* rects = nullptr);
   double MovingViewScale(const FrameContext& frame, const ViewFrame& seen) const;
   std::vector<Viewport> ModelRects(const View& view) const;
-  SceneLayers layers() const { return SceneLayers{statics, dynamics, sky}; }
+  SceneLayers layers() const { return SceneLayers{statics, dynamics, *avatars, sky}; }
 };
 
 absl::Status Renderer::Impl::Render(const std::vector<View>& views, int w, int h) {
@@ -116,7 +124,7 @@ absl::Status Renderer::Impl::Render(const std::vector<View>& views, int w, int h
   const GLuint target = guard.draw();
   if (absl::Status s = EnsureTargets(w, h); !s.ok()) return s;
   // Shadow maps, only where a projector's pose or the geometry changed.
-  if (absl::Status s = shadows->Update(cameras, statics, dynamics, stats); !s.ok()) return s;
+  if (absl::Status s = shadows->Update(cameras, statics, dynamics, *avatars, stats); !s.ok()) return s;
   // The frame's projector passes, their frustum volumes and the models' shadow volumes.
   const FrameContext frame = BeginFrame();
   reduced_views.clear();
@@ -211,8 +219,8 @@ void Renderer::Impl::DrawViewExact(const FrameContext& frame, const View& view, 
 }
 
 void Renderer::Impl::AccumulateAndResolve(const FrameContext& frame, const View& view, const ViewFrame& seen,
-                                          const View* output) {
-  projection->Accumulate(frame, view, seen, gbuffer->working());
+                                          const View* output, const std::vector<Viewport>* rects) {
+  projection->Accumulate(frame, view, seen, gbuffer->working(), rects);
   glBindFramebuffer(GL_FRAMEBUFFER, seen.target);
   const internal::GbufferTargets& g = gbuffer->working();
   ResolveSource source;
@@ -226,6 +234,11 @@ void Renderer::Impl::AccumulateAndResolve(const FrameContext& frame, const View&
     glViewport(o.x, o.y, o.width, o.height);
     glScissor(o.x, o.y, o.width, o.height);
     resolve->Resolve(frame, *output, seen.any_live, seen.any_retained, source, ResolveMode::kPlain, &view.viewport);
+  } else if (rects != nullptr) {
+    for (const Viewport& r : *rects) {
+      glScissor(r.x, r.y, r.width, r.height);
+      resolve->Resolve(frame, view, seen.any_live, seen.any_retained, source);
+    }
   } else {
     resolve->Resolve(frame, view, seen.any_live, seen.any_retained, source);
   }
@@ -261,6 +274,19 @@ void Renderer::Impl::DrawViewCached(const FrameContext& frame, const std::vector
   } else {
     ++stats.view_cache_hits;
   }
+  // When the models' rectangles cover much of the view, patching them (exact passes per
+  // rectangle, shadow tests over the cached entries) costs more than drawing the view exactly once
+  // (docs/BENCHMARKS.md "Avatars in the viewer"); the cache is kept for when they have gone.
+  std::vector<Viewport> rects = ModelRects(view);
+  int64_t covered = 0;
+  for (const Viewport& r : rects) covered += static_cast<int64_t>(r.width) * r.height;
+  if (covered * 3 > static_cast<int64_t>(view.viewport.width) * view.viewport.height) {
+    DrawViewExact(frame, view, seen);
+    entry.patches = {view.viewport};  // the working G-buffer holds the whole view (ReadLinearDepth)
+    entry.last_frame = stats.frames + 1;
+    ++stats.views_exact_for_models;
+    return;
+  }
   // Where a model is in a visible live projector's shadow map, the cached entries are tested
   // against it (only those whose video falls where the models are in that projector's image).
   bool shadowed = false;
@@ -271,10 +297,19 @@ void Renderer::Impl::DrawViewCached(const FrameContext& frame, const std::vector
     if (cameras.slots()[frame.passes[k].layer].shadow.dynamic_has_models) shadowed = true;
   }
   shadowed = shadowed && entry.any_live && options.dynamic_objects_cast_shadows;
+  // A crowd (issue 17): counting every model's shadow volumes in the stencil (each from the model
+  // to the end of its projector's frustum) and then testing the pixels inside them cost more than
+  // testing the entries of every pixel in the resolve itself (ave-bench avatars, 100 people under
+  // 3 cameras: ~160 ms against ~50 ms more than the plain resolve, CPU).
+  const bool crowd = shadowed && dynamics.model_bounds().size() > kCrowdModels;
   glBindFramebuffer(GL_FRAMEBUFFER, seen.target);
   const ResolveSource source = cache.Source(entry);
-  resolve->Resolve(frame, view, entry.any_live, entry.any_retained, source);
-  if (shadowed) {
+  resolve->Resolve(frame, view, entry.any_live, entry.any_retained, source,
+                   crowd ? ResolveMode::kShadowedAll : ResolveMode::kPlain);
+  if (crowd) {
+    ++stats.view_cache_shadow_tests;
+    ++stats.view_cache_shadowed_all;
+  } else if (shadowed) {
     shadow_volumes->Mark(view);
     // Inside the volumes, keep only pixels with an entry the models may hide. That pass runs on
     // every pixel of the view (a shader that discards and writes stencil gets no early stencil
@@ -289,15 +324,23 @@ void Renderer::Impl::DrawViewCached(const FrameContext& frame, const std::vector
                      by_entries ? ResolveMode::kMarked : ResolveMode::kInVolumes);
     ++stats.view_cache_shadow_tests;
   }
-  entry.patches = ModelRects(view);
+  entry.patches = std::move(rects);
   entry.last_frame = stats.frames + 1;
-  for (const Viewport& r : entry.patches) {
-    glScissor(r.x, r.y, r.width, r.height);
-    cache.CopyRect(r, gbuffer->working());
+  if (!entry.patches.empty()) {
+    // The rectangles pass by pass, not one after the other (issue 17): each patch rebound the
+    // G-buffer, accumulation and target framebuffers, and 100 people's patches drawn one by one
+    // cost ~100 CPU ms per frame on llvmpipe (ave-bench avatars).
+    Viewport all = entry.patches.front();
+    for (const Viewport& r : entry.patches) {
+      cache.CopyRect(r, gbuffer->working());
+      all = internal::Union(all, r);
+    }
+    // Every model lies in its own rectangle: one draw within their union writes no pixel outside.
+    glScissor(all.x, all.y, all.width, all.height);
     gbuffer->Bind();
     gbuffer->Draw(view, layers(), /*with_static=*/false, /*with_dynamic=*/true, stats);
-    AccumulateAndResolve(frame, view, seen);
-    ++stats.view_cache_patches;
+    AccumulateAndResolve(frame, view, seen, nullptr, &entry.patches);
+    stats.view_cache_patches += entry.patches.size();
   }
   const Viewport& v = view.viewport;
   glScissor(v.x, v.y, v.width, v.height);
@@ -328,7 +371,7 @@ double Renderer::Impl::MovingViewScale(const FrameContext& frame, const ViewFram
 }
 
 // The screen rectangles of a view around the dynamic models' boxes (drawn exactly over a cached
-// view), merged so that none overlap.
+// view), as disjoint runs of squares that cover them.
 std::vector<Viewport> Renderer::Impl::ModelRects(const View& view) const {
   std::vector<Viewport> rects;
   const Eigen::Matrix4d clip_from_local = view.projection * view.view;
@@ -337,8 +380,10 @@ std::vector<Viewport> Renderer::Impl::ModelRects(const View& view) const {
       rects.push_back(*rect);
     }
   }
-  internal::MergeOverlapping(rects);
-  return rects;
+  // Squares, not merged rectangles: a crowd's rectangles overlap one another and grew into a few
+  // covering most of the view (issue 17, ave-bench avatars: 100 people, 2-3 rectangles over 57% of
+  // it; their squares cover 29%).
+  return internal::CoveringTiles(rects, view.viewport, kPatchTilePixels);
 }
 
 Renderer::Renderer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
@@ -377,6 +422,7 @@ absl::StatusOr<std::unique_ptr<Renderer>> Renderer::Create(const RendererOptions
   };
   if (absl::Status s = assign(impl->shadows, ShadowMaps::Create(o)); !s.ok()) return s;
   if (absl::Status s = assign(impl->gbuffer, GbufferPass::Create(o)); !s.ok()) return s;
+  if (absl::Status s = assign(impl->avatars, internal::AvatarPass::Create()); !s.ok()) return s;
   if (absl::Status s = assign(impl->projection, ProjectionPass::Create(o, cache_supported, impl->video, *impl->shadows));
       !s.ok()) {
     return s;
@@ -447,6 +493,19 @@ absl::Status Renderer::SetDynamicModels(const std::vector<DynamicModel>& models)
 }
 
 absl::Status Renderer::SetPaths(const std::vector<Polyline>& paths) { return impl_->lines->SetPaths(paths); }
+
+absl::Status Renderer::SetAvatarSequence(const avatar::AvatarSequence& sequence) {
+  if (absl::Status s = impl_->avatars->SetSequence(sequence); !s.ok()) return s;
+  impl_->dynamics.SetAvatarBounds({});  // its instances are gone until SetAvatars
+  return absl::OkStatus();
+}
+
+absl::Status Renderer::SetAvatars(const std::vector<AvatarInstance>& avatars) {
+  const uint64_t before = impl_->avatars->version();
+  if (absl::Status s = impl_->avatars->SetInstances(avatars); !s.ok()) return s;
+  if (impl_->avatars->version() != before) impl_->dynamics.SetAvatarBounds(impl_->avatars->instance_bounds());
+  return absl::OkStatus();
+}
 
 absl::Status Renderer::SetPointCloud(const PointCloud& points) {
   if (absl::Status s = impl_->points->Set(points); !s.ok()) return s;

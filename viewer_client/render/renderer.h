@@ -54,6 +54,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "model_store/avatar/avatar_sequence.h"
 #include "model_store/geometry/mesh.h"
 
 namespace ave::viewer {
@@ -127,6 +128,15 @@ struct DynamicModel {
   ModelShape shape = ModelShape::kCuboid;
 };
 
+// A person drawn as a frame of an avatar sequence (issue 17, i4D §5; Renderer::SetAvatars): the
+// sequence's foot centre at `base`, its +x axis (the walking direction) at heading_rad.
+struct AvatarInstance {
+  std::string sequence;                            // a name given to SetAvatarSequence
+  Eigen::Vector3d base = Eigen::Vector3d::Zero();  // ground contact, local frame
+  double heading_rad = 0;                          // from local +x, counter-clockwise
+  double phase_cycles = 0;                         // walk phase: frame floor(phase * frames), wrapped
+};
+
 // A polyline drawn as lines (object paths), local frame.
 struct Polyline {
   std::vector<Eigen::Vector3d> points;
@@ -164,6 +174,9 @@ struct DisplayOptions {
   double retention_half_life_s = 60;
   bool tint_by_age = false;  // tint retained imagery from yellow (fresh) to blue (old)
   bool sky = true;           // a sky dome receives imagery above the horizon
+  // Projected video lands on avatars (issue 17). false: the privacy export (--avatars-only):
+  // people show their avatar's own texture and no video pixel lands on them.
+  bool video_on_people = true;
 
   std::string Check() const;  // empty when usable; otherwise names the first bad field
 };
@@ -267,6 +280,12 @@ struct RenderStats {
   uint64_t views_reduced = 0;  // of those, drawn at reduced resolution (RendererOptions::moving_view_scale)
   // Views drawn in full whose static G-buffer came from their cache (only projectors changed).
   uint64_t views_static_from_cache = 0;
+  // ... of which tested every pixel's entries in the resolve: a crowd of over 24 models, whose
+  // shadow volumes cost more to count than that.
+  uint64_t view_cache_shadowed_all = 0;
+  // Cached views drawn exactly because the dynamic models' rectangles covered over a third of the
+  // view (patching them costs more then).
+  uint64_t views_exact_for_models = 0;
 };
 
 // Most live projector entries the view cache keeps per pixel (RendererOptions::view_cache_entries).
@@ -287,6 +306,11 @@ class Renderer {
   absl::Status SetDynamicObjects(const std::vector<DynamicBox>& boxes);  // = cuboid DynamicModels
   absl::Status SetDynamicModels(const std::vector<DynamicModel>& models);
   absl::Status SetPaths(const std::vector<Polyline>& paths);
+  // Avatars (issue 17): a sequence's frames are uploaded once (replacing one of the same name);
+  // SetAvatars then places the people, each an instance drawn with the dynamic models (G-buffer,
+  // shadow maps). Errors name the sequence and frame, or the avatar.
+  absl::Status SetAvatarSequence(const avatar::AvatarSequence& sequence);
+  absl::Status SetAvatars(const std::vector<AvatarInstance>& avatars);
   // Replaces the point cloud (uploaded once, drawn every frame until replaced); empty: none.
   absl::Status SetPointCloud(const PointCloud& points);
   absl::Status SetDisplayOptions(const DisplayOptions& display);

@@ -1,5 +1,6 @@
 // Render tests against analytically expected pixels (render_test_scene.h): projection, shadows,
 // frustums, locked views, inputs and their errors, contexts, layout, the campus quad view.
+#include "viewer_client/render/passes/projector_geometry.h"
 #include "viewer_client/render/render_test_scene.h"
 
 namespace ave::viewer {
@@ -398,6 +399,35 @@ TEST(Campus, RendersQuadLayoutWithThreeProjectors) {
     }
   }
   EXPECT_GT(non_sky, 1000);
+}
+
+// The patches of a cached view (issue 17): squares cover every pixel of the model rectangles once,
+// stay inside the viewport, and two rectangles far apart do not grow into their union.
+TEST(CoveringTilesTest, CoversEachPixelOnceInsideTheViewport) {
+  const Viewport viewport{10, 20, 100, 50};
+  const std::vector<Viewport> rects = {{12, 22, 5, 5}, {14, 24, 20, 3}, {100, 60, 30, 30}, {0, 0, 5, 5}, {80, 21, 2, 2}};
+  const std::vector<Viewport> tiles = internal::CoveringTiles(rects, viewport, 8);
+  std::vector<int> count(static_cast<size_t>(viewport.width) * viewport.height, 0);
+  int64_t area = 0;
+  for (const Viewport& t : tiles) {
+    ASSERT_GE(t.x, viewport.x);
+    ASSERT_GE(t.y, viewport.y);
+    ASSERT_LE(t.x + t.width, viewport.x + viewport.width);
+    ASSERT_LE(t.y + t.height, viewport.y + viewport.height);
+    area += static_cast<int64_t>(t.width) * t.height;
+    for (int y = t.y; y < t.y + t.height; ++y)
+      for (int x = t.x; x < t.x + t.width; ++x) ++count[(y - viewport.y) * viewport.width + (x - viewport.x)];
+  }
+  for (int c : count) ASSERT_LE(c, 1) << "tiles overlap";
+  for (const Viewport& r : rects) {
+    for (int y = std::max(r.y, viewport.y); y < std::min(r.y + r.height, viewport.y + viewport.height); ++y)
+      for (int x = std::max(r.x, viewport.x); x < std::min(r.x + r.width, viewport.x + viewport.width); ++x)
+        ASSERT_EQ(count[(y - viewport.y) * viewport.width + (x - viewport.x)], 1) << x << ", " << y;
+  }
+  // x 12..33 of row 0 needs its columns 0..2 (24 x 8); (80, 21) one square; x 100..109, y 60..69
+  // the squares from column 11 and row 5 to the viewport's edge (12 x 10). Their union: 100 x 50.
+  EXPECT_EQ(area, 24 * 8 + 8 * 8 + 12 * 10);
+  EXPECT_TRUE(internal::CoveringTiles({}, viewport, 8).empty());
 }
 
 }  // namespace

@@ -85,10 +85,26 @@ absl::Status DynamicModels::Set(const std::vector<DynamicModel>& models) {
   if (same) return absl::OkStatus();
   mesh_.Upload(vertices, GL_DYNAMIC_DRAW);
   vertices_ = std::move(vertices);
-  bounds_ = bounds;
-  model_bounds_ = std::move(per_model);
-  ++version_;
+  own_bounds_ = bounds;
+  own_model_bounds_ = std::move(per_model);
+  MergeBounds();
   return CheckGl("SetDynamicObjects");
+}
+
+void DynamicModels::SetAvatarBounds(const std::vector<Bounds>& avatar_bounds) {
+  avatar_bounds_ = avatar_bounds;
+  MergeBounds();
+}
+
+void DynamicModels::MergeBounds() {
+  bounds_ = own_bounds_;
+  model_bounds_ = own_model_bounds_;
+  for (const Bounds& b : avatar_bounds_) {
+    bounds_.Add(b.lo);
+    bounds_.Add(b.hi);
+    model_bounds_.push_back(b);
+  }
+  ++version_;
 }
 
 void DynamicModels::Draw() const { mesh_.Draw(GL_TRIANGLES); }

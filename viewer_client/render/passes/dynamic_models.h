@@ -21,6 +21,9 @@ class DynamicModels {
   absl::Status Set(const std::vector<DynamicModel>& models);
   // The models with the bound program and state (faces wound counter-clockwise from outside).
   void Draw() const;
+  // The avatars' boxes (AvatarPass::instance_bounds, issue 17) join the models' bounds, so the
+  // shadow maps, shadow volumes and view-cache rectangles treat avatars as dynamic models too.
+  void SetAvatarBounds(const std::vector<Bounds>& avatar_bounds);
 
   const Bounds& bounds() const { return bounds_; }                     // all models, any heading
   const std::vector<Bounds>& model_bounds() const { return model_bounds_; }  // per model
@@ -31,6 +34,10 @@ class DynamicModels {
   std::vector<Vertex> vertices_;
   Bounds bounds_;
   std::vector<Bounds> model_bounds_;
+  Bounds own_bounds_;                        // the models' alone
+  std::vector<Bounds> own_model_bounds_;
+  std::vector<Bounds> avatar_bounds_;
+  void MergeBounds();
   uint64_t version_ = 1;
 };
 

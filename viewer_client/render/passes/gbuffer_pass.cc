@@ -54,7 +54,13 @@ void GbufferPass::Draw(const View& view, const SceneLayers& layers, bool with_st
   // from inside: back faces culled.
   glEnable(GL_CULL_FACE);
   glCullFace(GL_BACK);
-  if (with_dynamic) layers.dynamics.Draw();
+  if (with_dynamic) {
+    layers.dynamics.Draw();
+    if (layers.avatars.instance_count() > 0) {
+      layers.avatars.Draw(view.projection * view.view, options_, options_.display.video_on_people);
+      glUseProgram(program_.id);
+    }
+  }
   layers.sky.Draw(with_static && options_.display.sky);
 }
 

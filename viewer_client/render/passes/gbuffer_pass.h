@@ -7,6 +7,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "viewer_client/render/passes/avatar_pass.h"
 #include "viewer_client/render/passes/dynamic_models.h"
 #include "viewer_client/render/passes/gl_util.h"
 #include "viewer_client/render/passes/sky.h"
@@ -27,6 +28,7 @@ struct GbufferTargets {
 struct SceneLayers {
   const StaticModel& statics;
   const DynamicModels& dynamics;
+  const AvatarPass& avatars;  // drawn with the dynamic models (issue 17)
   const Sky& sky;
 };
 

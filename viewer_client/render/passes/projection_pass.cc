@@ -110,7 +110,15 @@ void ProjectionPass::BindInputs(const View& view, const Program& program, const 
 }
 
 void ProjectionPass::Accumulate(const FrameContext& frame, const View& view, const ViewFrame& seen,
-                                const GbufferTargets& gbuffer) {
+                                const GbufferTargets& gbuffer, const std::vector<Viewport>* rects) {
+  // Within the scissor box, or within each rectangle in turn (one framebuffer binding for all).
+  auto each = [rects](auto&& draw) {
+    if (rects == nullptr) return draw();
+    for (const Viewport& r : *rects) {
+      glScissor(r.x, r.y, r.width, r.height);
+      draw();
+    }
+  };
   const bool last_wins = options_.display.overlap == OverlapPolicy::kLastWins;
   glBindFramebuffer(GL_FRAMEBUFFER, fbo_);
   // Only the targets this view's passes write are cleared, and only those the resolve reads.
@@ -120,7 +128,7 @@ void ProjectionPass::Accumulate(const FrameContext& frame, const View& view, con
                               seen.any_retained ? GLenum{GL_COLOR_ATTACHMENT2} : none};
   glDrawBuffers(3, all_accum);
   GbufferPass::ApplyState();
-  if (seen.any_live || seen.any_retained) glClear(GL_COLOR_BUFFER_BIT);
+  if (seen.any_live || seen.any_retained) each([] { glClear(GL_COLOR_BUFFER_BIT); });
   BindInputs(view, projector_, gbuffer);
   BindTexture(kVideoUnit, GL_TEXTURE_2D_ARRAY, video_.live());
   BindTexture(kShadowUnit, GL_TEXTURE_2D_ARRAY,
@@ -129,13 +137,14 @@ void ProjectionPass::Accumulate(const FrameContext& frame, const View& view, con
   glDrawBuffers(2, live_buffers);
   ApplyState(State::kVolumes, /*blend=*/!last_wins);
   if (options_.combined_live_passes) {
-    DrawCombinedLive(frame, view, seen, last_wins);
+    each([&] { DrawCombinedLive(frame, view, seen, last_wins); });
   } else {
     for (size_t k = 0; k < frame.passes.size(); ++k) {
-      if (seen.visible[k] && !frame.passes[k].retained) DrawPass(projector_.u, frame.passes[k], k, last_wins, frame.stats);
+      if (!seen.visible[k] || frame.passes[k].retained) continue;
+      each([&] { DrawPass(projector_.u, frame.passes[k], k, last_wins, frame.stats); });
     }
   }
-  if (seen.any_retained) DrawRetained(frame, view, seen, gbuffer);
+  if (seen.any_retained) each([&] { DrawRetained(frame, view, seen, gbuffer); });
 }
 
 void ProjectionPass::DrawRetained(const FrameContext& frame, const View& view, const ViewFrame& seen,

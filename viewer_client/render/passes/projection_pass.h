@@ -34,8 +34,11 @@ class ProjectionPass {
   void UploadVolumes(const std::vector<LineVertex>& volumes) { volumes_.Upload(volumes, GL_STREAM_DRAW); }
 
   // The view's visible passes into the working accumulation targets (only those the passes write
-  // are cleared), reading `gbuffer`, within the scissor box.
-  void Accumulate(const FrameContext& frame, const View& view, const ViewFrame& seen, const GbufferTargets& gbuffer);
+  // are cleared), reading `gbuffer`, within the scissor box, or within each of `rects` (the
+  // patches of a cached view: every pass draws all of them before the next pass, leaving the
+  // scissor box at the last).
+  void Accumulate(const FrameContext& frame, const View& view, const ViewFrame& seen, const GbufferTargets& gbuffer,
+                  const std::vector<Viewport>* rects = nullptr);
   // The view cache's mapping: the visible live passes' entries into `mapping` (image load/store,
   // a barrier between projectors), reading `gbuffer`.
   void DrawMapping(const FrameContext& frame, const View& view, const ViewFrame& seen, const GbufferTargets& gbuffer,

@@ -1,6 +1,7 @@
 #include "viewer_client/render/passes/projector_geometry.h"
 
 #include <algorithm>
+#include <cstdint>
 #include <cmath>
 #include <limits>
 
@@ -231,18 +232,51 @@ std::optional<Viewport> ScreenRect(const std::vector<Eigen::Vector4d>& points, c
   return Viewport{ix0, iy0, ix1 - ix0, iy1 - iy0};
 }
 
-void MergeOverlapping(std::vector<Viewport>& rects) {
-  for (bool merged = true; merged;) {
-    merged = false;
-    for (size_t a = 0; a < rects.size() && !merged; ++a) {
-      for (size_t b = a + 1; b < rects.size() && !merged; ++b) {
-        if (!Overlap(rects[a], rects[b])) continue;
-        rects[a] = Union(rects[a], rects[b]);
-        rects.erase(rects.begin() + static_cast<std::ptrdiff_t>(b));
-        merged = true;
-      }
+std::vector<Viewport> CoveringTiles(const std::vector<Viewport>& rects, const Viewport& viewport, int tile) {
+  const int columns = (viewport.width + tile - 1) / tile, rows = (viewport.height + tile - 1) / tile;
+  std::vector<uint8_t> covered(static_cast<size_t>(columns) * rows, 0);
+  for (const Viewport& r : rects) {
+    if (!Overlap(r, viewport)) continue;
+    const Viewport c = Intersection(r, viewport);
+    const int c0 = (c.x - viewport.x) / tile, c1 = (c.x + c.width - 1 - viewport.x) / tile;
+    const int r0 = (c.y - viewport.y) / tile, r1 = (c.y + c.height - 1 - viewport.y) / tile;
+    for (int row = r0; row <= r1; ++row) {
+      std::fill(covered.begin() + row * columns + c0, covered.begin() + row * columns + c1 + 1, 1);
     }
   }
+  std::vector<Viewport> out;
+  std::vector<size_t> previous_row, this_row;  // indices into out of the runs ending at the row
+  for (int row = 0; row < rows; ++row) {
+    this_row.clear();
+    for (int col = 0; col < columns;) {
+      if (!covered[row * columns + col]) {
+        ++col;
+        continue;
+      }
+      int end = col;
+      while (end < columns && covered[row * columns + end]) ++end;
+      const int x = viewport.x + col * tile, y = viewport.y + row * tile;
+      const Viewport run{x, y, std::min(end * tile, viewport.width) - col * tile,
+                         std::min((row + 1) * tile, viewport.height) - row * tile};
+      bool joined = false;
+      for (size_t k : previous_row) {
+        Viewport& above = out[k];
+        if (above.x == run.x && above.width == run.width && above.y + above.height == run.y) {
+          above.height += run.height;
+          this_row.push_back(k);
+          joined = true;
+          break;
+        }
+      }
+      if (!joined) {
+        out.push_back(run);
+        this_row.push_back(out.size() - 1);
+      }
+      col = end;
+    }
+    std::swap(previous_row, this_row);
+  }
+  return out;
 }
 
 std::optional<Viewport> BoxesScreenRect(std::span<const Bounds> boxes, const Eigen::Matrix4d& clip_from_local,

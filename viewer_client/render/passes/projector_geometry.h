@@ -120,8 +120,10 @@ bool VolumeMayBeVisible(const std::array<Eigen::Vector3d, 8>& corners, const Eig
 bool Overlap(const Viewport& a, const Viewport& b);
 Viewport Union(const Viewport& a, const Viewport& b);
 Viewport Intersection(const Viewport& a, const Viewport& b);
-// Merges overlapping rectangles until none overlap (each pixel drawn once).
-void MergeOverlapping(std::vector<Viewport>& rects);
+// Disjoint rectangles of `tile`-pixel squares (from the viewport's corner, clipped to it) that
+// cover every pixel of `rects`: runs of squares along rows, equal runs of adjacent rows joined.
+// Scattered rectangles (a crowd) do not grow into their union, as merging overlapping ones did.
+std::vector<Viewport> CoveringTiles(const std::vector<Viewport>& rects, const Viewport& viewport, int tile);
 // The pixels of `viewport` that the convex hull of the points may cover in a view with this
 // matrix, padded by two pixels. Points are homogeneous: w = 0 is a direction, standing for the
 // whole ray towards it from the other points (its image ends at the direction's vanishing point).

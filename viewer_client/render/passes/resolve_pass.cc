@@ -23,6 +23,7 @@ void ResolvePass::ApplyState(ResolveMode mode) {
   glEnable(GL_SCISSOR_TEST);
   switch (mode) {
     case ResolveMode::kPlain:
+    case ResolveMode::kShadowedAll:
       glEnable(GL_DEPTH_TEST);
       glDepthFunc(GL_ALWAYS);
       glDepthMask(GL_TRUE);
@@ -56,12 +57,14 @@ absl::StatusOr<std::unique_ptr<ResolvePass>> ResolvePass::Create(const RendererO
                                                                   const VideoLayers& video, const ShadowMaps& shadows) {
   std::unique_ptr<ResolvePass> pass(new ResolvePass(options, video, shadows));
   const std::string entries = "#define ENTRIES " + std::to_string(options.view_cache_entries) + "\n";
-  for (int variant = 0; variant < (with_cache ? 32 : 4); ++variant) {
+  for (int variant = 0; variant < (with_cache ? 64 : 4); ++variant) {
     if ((variant & 8) && (variant & 5) != 5) continue;
     if ((variant & 16) && !(variant & 8)) continue;
+    if ((variant & 32) && (!(variant & 8) || (variant & 16))) continue;
     const std::string defines = std::string(variant & 1 ? "#define LIVE\n" : "") +
                                 (variant & 2 ? "#define RETAINED\n" : "") + (variant & 4 ? "#define CACHED\n" : "") +
                                 (variant & 8 ? "#define SHADOWED\n" : "") + (variant & 16 ? "#define MARK\n" : "") +
+                                (variant & 32 ? "#define WITH_DEPTH\n" : "") +
                                 entries + "#define MAX_PROJECTORS " + std::to_string(kMaxProjectors) + "\n";
     absl::StatusOr<Program> program =
         Program::Build("shaders/resolve.vert.glsl", "shaders/resolve.frag.glsl", defines,
@@ -80,8 +83,8 @@ void ResolvePass::Resolve(const FrameContext& frame, const View& view, bool any_
   const bool shadowed = mode != ResolveMode::kPlain;
   const bool mark = mode == ResolveMode::kMarkEntries;
   ApplyState(mode);
-  const int variant =
-      (any_live ? 1 : 0) + (any_retained ? 2 : 0) + (source.cached ? 4 : 0) + (shadowed ? 8 : 0) + (mark ? 16 : 0);
+  const int variant = (any_live ? 1 : 0) + (any_retained ? 2 : 0) + (source.cached ? 4 : 0) + (shadowed ? 8 : 0) +
+                      (mark ? 16 : 0) + (mode == ResolveMode::kShadowedAll ? 32 : 0);
   glUseProgram(variants_[variant].id);
   const Uniforms& u = variants_[variant].u;
   const Viewport& v = view.viewport;

@@ -34,6 +34,9 @@ enum class ResolveMode {
   kMarkEntries,
   kMarked,
   kInVolumes,
+  // The plain cached resolve with every entry tested as kInVolumes tests them, colour and depth on
+  // every pixel: for a crowd, whose shadow volumes cost more to count than this (issue 17).
+  kShadowedAll,
 };
 
 class ResolvePass {
@@ -58,7 +61,7 @@ class ResolvePass {
   const RendererOptions& options_;
   const VideoLayers& video_;
   const ShadowMaps& shadows_;
-  std::array<Program, 32> variants_;  // by bits: live 1, retained 2, cached 4, shadowed 8, mark 16
+  std::array<Program, 64> variants_;  // by bits: live 1, retained 2, cached 4, shadowed 8, mark 16, depth 32
   VertexArray empty_vao_ = VertexArray::Create();
 };
 

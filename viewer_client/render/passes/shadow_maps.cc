@@ -95,6 +95,7 @@ void ShadowMaps::ReadExtent(const Eigen::Matrix4d& shadow_projection, ShadowSlot
 
 absl::Status ShadowMaps::UpdateLayer(Arrays& arrays, int layer, ShadowSlot& slot, const Projector& p,
                                      bool with_dynamic, const StaticModel& statics, const DynamicModels& dynamics,
+                                     const AvatarPass& avatars,
                                      bool& state_set, uint64_t& counter, RenderStats& stats) {
   const int size = options_.shadow_map_size;
   const ProjectorGl g = MakeProjectorGl(p, size);
@@ -146,6 +147,10 @@ absl::Status ShadowMaps::UpdateLayer(Arrays& arrays, int layer, ShadowSlot& slot
                         GL_DEPTH_BUFFER_BIT, GL_NEAREST);
     }
     dynamics.Draw();
+    if (avatars.instance_count() > 0) {
+      avatars.Draw(shadow_clip, options_, /*receive_video=*/true);  // depth only here
+      glUseProgram(program_.id);
+    }
     ++stats.dynamic_shadow_updates;
     slot.dynamic_has_models = now.has_value();
     slot.dynamic_rect = now.value_or(Viewport{});
@@ -158,7 +163,7 @@ absl::Status ShadowMaps::UpdateLayer(Arrays& arrays, int layer, ShadowSlot& slot
 }
 
 absl::Status ShadowMaps::Update(CameraSet& cameras, const StaticModel& statics, const DynamicModels& dynamics,
-                                RenderStats& stats) {
+                                const AvatarPass& avatars, RenderStats& stats) {
   const int size = options_.shadow_map_size;
   const bool with_dynamic = options_.dynamic_objects_cast_shadows;
   const std::vector<Projector>& projectors = cameras.projectors();
@@ -169,7 +174,7 @@ absl::Status ShadowMaps::Update(CameraSet& cameras, const StaticModel& statics, 
   for (size_t i = 0; i < projectors.size(); ++i) {
     if (!cameras.LiveActive(i)) continue;
     if (absl::Status s = UpdateLayer(live_, static_cast<int>(i), cameras.slots()[i].shadow, projectors[i], with_dynamic,
-                                     statics, dynamics, state_set, stats.shadow_map_renders, stats);
+                                     statics, dynamics, avatars, state_set, stats.shadow_map_renders, stats);
         !s.ok()) {
       return s;
     }
@@ -187,7 +192,7 @@ absl::Status ShadowMaps::Update(CameraSet& cameras, const StaticModel& statics, 
     RetainedSnapshot& r = retained[k];
     if (!cameras.RetainedActive(r)) continue;
     if (absl::Status s = UpdateLayer(retained_, static_cast<int>(k), r.shadow, r.projector, false, statics, dynamics,
-                                     state_set, stats.retained_shadow_renders, stats);
+                                     avatars, state_set, stats.retained_shadow_renders, stats);
         !s.ok()) {
       return s;
     }

@@ -11,6 +11,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "viewer_client/render/passes/avatar_pass.h"
 #include "viewer_client/render/passes/cameras.h"
 #include "viewer_client/render/passes/dynamic_models.h"
 #include "viewer_client/render/passes/gl_util.h"
@@ -23,8 +24,9 @@ class ShadowMaps {
   static absl::StatusOr<std::unique_ptr<ShadowMaps>> Create(const RendererOptions& options);
 
   // Brings every active layer up to date with the cameras' poses and the geometry's versions.
+  // The avatars (issue 17) cast shadows with the dynamic models (their bounds are among them).
   absl::Status Update(CameraSet& cameras, const StaticModel& statics, const DynamicModels& dynamics,
-                      RenderStats& stats);
+                      const AvatarPass& avatars, RenderStats& stats);
 
   GLuint live_static() const { return live_.static_array; }
   GLuint live_dynamic() const { return live_.dynamic_array; }
@@ -43,7 +45,8 @@ class ShadowMaps {
   static void ApplyState();
   // Renders the shadow map of one layer if its projector or the geometry changed.
   absl::Status UpdateLayer(Arrays& arrays, int layer, ShadowSlot& slot, const Projector& p, bool with_dynamic,
-                           const StaticModel& statics, const DynamicModels& dynamics, bool& state_set,
+                           const StaticModel& statics, const DynamicModels& dynamics, const AvatarPass& avatars,
+                           bool& state_set,
                            uint64_t& counter, RenderStats& stats);
   // The static shadow map bound for reading: its farthest depth and whether it sees nothing
   // somewhere. Skipped (bounds from the scene box) above 2048 px, where the read costs more than

@@ -144,7 +144,7 @@ void main() {
   vec3 position = local_h.xyz * inv_w;
 #ifdef COMBINED
   vec4 packed_normal = texelFetch(u_gbuffer_normal, pixel, 0);
-  if (packed_normal.a == 0.0) discard;
+  if (packed_normal.a < 0.75) discard;  // nothing drawn (0), or no video here (0.5: avatar_pass)
   vec3 n = normalize(2.0 * packed_normal.xyz - 1.0);
   vec4 sum = vec4(0.0);
   for (int k = 0; k < u_count; ++k) {
@@ -170,7 +170,7 @@ void main() {
   if (!ImagePoint(clip, u_pinhole, u_k1_k2_p1_p2, u_k3, u_distorted, ndc, inside)) discard;
 
   vec4 packed_normal = texelFetch(u_gbuffer_normal, pixel, 0);
-  if (packed_normal.a == 0.0) discard;
+  if (packed_normal.a < 0.75) discard;  // nothing drawn (0), or no video here (0.5: avatar_pass)
   vec3 n = normalize(2.0 * packed_normal.xyz - 1.0);
   float weight = ProjectorWeight(position, n, clip, ndc, inside, u_projector_position, u_shadow_clip_from_local,
                                  u_shadow_widen, u_normal_offset, u_layer, u_pinhole.x);

@@ -8,7 +8,8 @@
 // u_entries (video u, v, layer, weight) per pixel, the current frames sampled there and blended by
 // weight (the same weights the per-projector passes would sum; more than ENTRIES overlapping
 // cameras are truncated to the best ENTRIES). SHADOWED (with CACHED): entries are tested against
-// the projectors' shadow maps with the dynamic models in them where the models may hide them (Lit).
+// the projectors' shadow maps with the dynamic models in them where the models may hide them (Lit);
+// with WITH_DEPTH it is the plain resolve itself, over every pixel (a crowd: ResolveMode::kShadowedAll).
 uniform sampler2D u_gbuffer_color;
 uniform sampler2D u_gbuffer_depth;
 uniform sampler2D u_live;      // (sum weight * video, sum weight)
@@ -87,7 +88,7 @@ void main() {
 #endif
   vec4 g = texelFetch(u_gbuffer_color, pixel, 0);
   float depth = texelFetch(u_gbuffer_depth, pixel, 0).r;
-#ifndef SHADOWED
+#if !defined(SHADOWED) || defined(WITH_DEPTH)
   gl_FragDepth = depth;  // (SHADOWED: drawn over the plain resolve, depth kept, early stencil test)
 #endif
   vec3 color = g.a == 0.0 ? u_clear_color : g.rgb;
