@@ -7,7 +7,7 @@
 # client certificates (mutual TLS) and each streams with its own camera-bound token issued through
 # the admin API (the server keeps only the tokens' SHA-256).
 #   sudo deploy/demo.sh                 (AVE_SKIP_DEPS=1 skips the package check)
-# Output: ${AVE_DEMO_OUT:-build/demo}/quad.png, server.log, agent-*.log, ave.db, certs/, model.json,
+# Output: ${AVE_DEMO_OUT:-build/demo}/quad.png, server.log, viewer.log, agent-*.log, ave.db, certs/, model.json,
 # rec/ (the recording, issue 18: replay it with SceneService.Replay)
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
@@ -77,6 +77,33 @@ server=127.0.0.1:$port
 echo "demo: server on $server (TLS); registering the campus cameras"
 "$bin/ave-admin" --server "$server" import-campus
 
+# Issue 17: the people walk as 4D avatars reconstructed in the simulated 13+1-camera studio:
+# ave-sim studio renders it, ave-studio segments (shadows removed), carves the visual hull, meshes,
+# textures and finds the walk cycle (walk.avseq), ave-admin put-avatar stores it; the server then
+# gives every tracked person an avatar walking its track. Made once per build folder (about 15 s);
+# AVE_DEMO_AVATARS=0 leaves people as boxes and cylinders.
+if [ "${AVE_DEMO_AVATARS:-1}" = 1 ]; then
+  avatar_dir=$build/demo-avatar
+  # Two demos may share a build folder (the demo and window tests run at once): the first makes the
+  # sequence in a folder of its own and moves it into place under a lock; the other waits for it.
+  exec 9>"$build/demo-avatar.lock"
+  flock 9
+  if [ ! -s "$avatar_dir/walk.avseq" ]; then
+    echo "demo: reconstructing the walking avatar in the simulated studio (once per build)"
+    studio_tmp=$(mktemp -d "$build/demo-avatar.XXXXXX")
+    "$bin/ave-sim" studio --scenario studio --out "$studio_tmp/studio" >/dev/null
+    "$bin/ave-studio" --input "$studio_tmp/studio" --out "$studio_tmp/out" --voxel-mm 20 --name studio-walk \
+      2>"$out/studio.log" || { cat "$out/studio.log" >&2; rm -rf "$studio_tmp"; echo "demo: ave-studio failed" >&2; exit 1; }
+    rm -rf "$avatar_dir"
+    mv "$studio_tmp/out" "$avatar_dir"
+    rm -rf "$studio_tmp"
+  fi
+  flock -u 9
+  exec 9>&-
+  "$bin/ave-admin" --server "$server" put-avatar --file "$avatar_dir/walk.avseq" --name studio-walk >/dev/null
+  echo "demo: avatar sequence studio-walk stored; tracked people walk as avatars"
+fi
+
 for cam in cam1 cam2 cam3; do
   # A token bound to this camera only (printed once by the server, kept here in memory).
   cam_token=$("$bin/ave-admin" --server "$server" issue-token --role sensor --camera "$cam" --label "demo $cam" 2>/dev/null)
@@ -118,12 +145,14 @@ if [ -n "${DISPLAY:-}" ] && [ "${AVE_DEMO_HEADLESS:-0}" != 1 ]; then
   echo "demo: opening the viewer window (close it to stop)"
   # Waits for the first frames so the window opens on live video.
   sleep 2
-  "$bin/ave-viewer" --server "$server" --snapshot "$out/quad.png" --frames "${AVE_VIEWER_FRAMES:-0}"
+  "$bin/ave-viewer" --server "$server" --snapshot "$out/quad.png" --frames "${AVE_VIEWER_FRAMES:-0}" 2>"$out/viewer.log" ||
+    { tail -5 "$out/viewer.log" >&2; echo "demo: ave-viewer failed" >&2; exit 1; }
 else
   echo "demo: no DISPLAY, rendering headless"
   # Tracks become objects only after persisting 1 s (issue 6): let them form before the snapshot.
   sleep "${AVE_DEMO_WARMUP_S:-4}"
-  "$bin/ave-viewer" --server "$server" --headless --snapshot "$out/quad.png" --wait-cameras 3 --timeout 60
+  "$bin/ave-viewer" --server "$server" --headless --snapshot "$out/quad.png" --wait-cameras 3 --timeout 60 2>"$out/viewer.log" ||
+    { tail -5 "$out/viewer.log" >&2; echo "demo: ave-viewer failed" >&2; exit 1; }
 fi
 echo "demo: quad view written to $out/quad.png"
 "$bin/ave-admin" --server "$server" list >"$out/cameras.json"

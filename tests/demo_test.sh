@@ -29,6 +29,10 @@ grep -q "ave-server stopped" "$out/server.log" || { echo "FAIL: server did not s
 # Issue 8: the demo runs over TLS, sensors with their own camera-bound tokens, metrics exported.
 grep -q "listening on port [0-9]* (TLS)" "$out/server.log" || { echo "FAIL: the demo server is not serving TLS"; exit 1; }
 grep -q "IssueToken" "$out/server.log" || { echo "FAIL: no per-camera sensor token was issued"; exit 1; }
+# Issue 17: the studio's walk cycle was stored and the viewer fetched it for the people it drew.
+grep -q "PutAvatarSequence" "$out/server.log" || { echo "FAIL: no avatar sequence was stored"; exit 1; }
+grep -q "avatar sequence 'studio-walk' version [0-9]*: [0-9]* frames" "$out/viewer.log" 2>/dev/null ||
+  { echo "FAIL: the viewer drew no avatar (viewer.log: $(tail -3 "$out/viewer.log" 2>/dev/null))"; exit 1; }
 frames=$(sed -n 's/^ave_frames_in_total \([0-9]*\)$/\1/p' "$out/metrics.txt" 2>/dev/null || true)
 [ "${frames:-0}" -gt 0 ] || { echo "FAIL: metrics show no frames in (metrics.txt: $(head -c 200 "$out/metrics.txt" 2>/dev/null))"; exit 1; }
 sweeps=$(sed -n 's/^ave_lidar_sweeps_in_total \([0-9]*\)$/\1/p' "$out/metrics.txt" 2>/dev/null || true)

@@ -6,8 +6,8 @@
 // the people as avatars (one instanced draw per sequence frame, into the G-buffer and the shadow
 // maps) and, in the same run, as the cylinders the viewer draws without avatars (the peer).
 // The sequence is the procedural test walker (model_store/avatar/procedural_avatar.h, 12 frames,
-// 720 triangles a frame) until the studio's reconstructed walks exist: a studio frame has far
-// more triangles; --frame-triangles scales the walker's boxes into more triangles to show that.
+// 720 triangles a frame), or with --avseq the studio's reconstructed walk (`ave-studio`'s
+// walk.avseq: tens of thousands of triangles a frame and a texture atlas each).
 // Writes avatars_bench.png (the largest N) and ends with a one-line JSON summary.
 #include <algorithm>
 #include <chrono>
@@ -22,6 +22,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "model_store/avatar/avatar_blob.h"
 #include "model_store/avatar/procedural_avatar.h"
 #include "model_store/common/cpu_clock.h"
 #include "model_store/geometry/camera.h"
@@ -42,6 +43,7 @@ struct AvatarBenchOptions {
   std::string png = "avatars_bench.png";
   bool model_shadows = true;  // RendererOptions::dynamic_objects_cast_shadows
   bool view_cache = true;     // RendererOptions::view_cache
+  std::string avseq;          // a walk.avseq to draw instead of the procedural walker
 };
 
 struct Walker {
@@ -117,7 +119,17 @@ int Run(const AvatarBenchOptions& o) {
     return 1;
   }
   viewer::Renderer& r = **made;
-  const avatar::AvatarSequence walk = avatar::MakeProceduralWalk();
+  avatar::AvatarSequence walk;
+  if (o.avseq.empty()) {
+    walk = avatar::MakeProceduralWalk();
+  } else {
+    absl::StatusOr<avatar::AvatarSequence> read = avatar::ReadAvatarSequenceFile(o.avseq);
+    if (!read.ok()) {
+      std::fprintf(stderr, "ave-bench avatars: --avseq: %s\n", std::string(read.status().message()).c_str());
+      return 1;
+    }
+    walk = std::move(*read);
+  }
   size_t triangles = 0;
   for (const auto& f : walk.frames) triangles += f.indices.size() / 3;
   if (!r.SetStaticMesh(mesh).ok() || !r.SetAvatarSequence(walk).ok()) return 1;
@@ -269,7 +281,9 @@ Runner AddAvatarBench(CLI::App& sub) {
   sub.add_option("--frames", o->frames, "timed frames per row")->capture_default_str()->check(CLI::Range(1, 100000));
   sub.add_option("--counts", o->counts, "numbers of people, comma separated")->capture_default_str();
   sub.add_option("--cameras", o->cameras, "campus cameras projecting video")->capture_default_str()->check(CLI::Range(0, 64));
-  sub.add_option("--png", o->png, "picture of the largest count (empty: none)")->capture_default_str();
+  sub.add_option("--png", o->png, "picture of the largest count (empty: none)")->capture_default_str()->check(ave::cli::WritableFile());
+  sub.add_option("--avseq", o->avseq, "draw this avatar sequence (ave-studio's walk.avseq) instead of the procedural walker")
+      ->check(CLI::ExistingFile);
   sub.add_flag("!--no-model-shadows", o->model_shadows, "people cast no shadows in the projectors' shadow maps");
   sub.add_flag("!--no-view-cache", o->view_cache, "draw every frame exactly (RendererOptions::view_cache off)");
   // Not pinned to one core: llvmpipe's threads are the software GPU (as ave-bench render).
