@@ -417,7 +417,10 @@ void Recorder::FlushBatch() {
     if (seg.written > seg.row.bytes && ::fdatasync(seg.fd) != 0) {
       const int err = errno;
       // The batch's bytes of this segment may not be on disk: drop their rows and the bytes.
-      std::erase_if(batch_.frames, [&](const FrameRow& f) { return f.segment_path == seg.row.path; });
+      // (A named copy of the path: clang 14, which builds the fuzz targets, cannot capture a
+      // structured binding in a lambda.)
+      const std::string& failed_path = seg.row.path;
+      std::erase_if(batch_.frames, [&failed_path](const FrameRow& f) { return f.segment_path == failed_path; });
       if (::ftruncate(seg.fd, seg.row.bytes) != 0) AVE_LOG(ERROR) << "recording: cannot truncate '" << seg.row.path << "'";
       seg.written = seg.row.bytes;
       if (IsNoSpace(err)) SetDiskFull(true, absl::StrCat("disk full syncing '", seg.row.path, "': ", std::strerror(err)));
