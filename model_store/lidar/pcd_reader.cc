@@ -111,8 +111,27 @@ absl::Status CheckPcdHeader(const std::string& path) {
     return absl::InvalidArgumentError(path + ": PCD header: DATA must be ascii, binary or binary_compressed, not '" +
                                       data.substr(0, 40) + "'");
   }
+  // PCL's header loop does not stop at DATA: it reads on while a line is empty, a comment or
+  // VERSION, and a line whose first word starts with a header keyword is taken as header again.
+  // Binary data that begins with such bytes ("COLUMNS...", found by ave_fuzz_point_cloud) made PCL
+  // re-lay its fields over a buffer sized for the first layout and crash; refused here.
+  const std::streamoff body = in.tellg();
+  for (std::string next; std::getline(in, next);) {
+    if (next.empty()) continue;
+    std::istringstream words(next);
+    std::string first;
+    words >> first;
+    if (first.rfind('#', 0) == 0 || first.rfind("VERSION", 0) == 0) continue;
+    for (const char* keyword : {"FIELDS", "COLUMNS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA"}) {
+      if (first.rfind(keyword, 0) == 0) {
+        return absl::InvalidArgumentError(path + ": PCD data begins with the header keyword " + keyword +
+                                          " (PCL would read it as header, not as points)");
+      }
+    }
+    break;
+  }
+  in.clear();
   if (data == "binary") {
-    const std::streamoff body = in.tellg();
     in.seekg(0, std::ios::end);
     const std::streamoff file_bytes = in.tellg();
     if (body < 0 || file_bytes < 0 || static_cast<uint64_t>(file_bytes - body) < *points * point_bytes) {

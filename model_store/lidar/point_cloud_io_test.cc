@@ -118,7 +118,11 @@ TEST(PointCloudIo, BadPcdFilesNameTheFile) {
                                               "WIDTH 2\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n1 2 3 4\n"),
                                   // WIDTH x HEIGHT (what PCL reads) disagreeing with POINTS.
                                   std::string("VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"
-                                              "WIDTH 3000000\nHEIGHT 1000\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1\nDATA ascii\n1 2 3\n")}) {
+                                              "WIDTH 3000000\nHEIGHT 1000\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 1\nDATA ascii\n1 2 3\n"),
+                                  // Binary data whose first bytes spell a header keyword: PCL read
+                                  // on past DATA, re-laid its fields and crashed (ave_fuzz_point_cloud, CI).
+                                  std::string("FIELDS x y z\nSIZE 8 8 8\nTYPE F F F\nWIDTH 2\nPOINTS 2\nDATA binary\n"
+                                              "COLUMNS.") + std::string(40, '\x01')}) {
     SCOPED_TRACE(text.substr(0, 40));
     ASSERT_TRUE(WriteWholeFile(path, text).ok());
     absl::StatusOr<PointCloud> cloud = ReadPointCloud(path);
