@@ -159,9 +159,8 @@ std::string EncodeFrame(const LidarFrame& frame) {
   return out;
 }
 
-// ---- Velodyne HDL-64E-style pcap ----
+// ---- Velodyne HDL-64E-style pcap (1206-byte payloads: 12 blocks of 100 bytes, then 6) ----
 
-constexpr size_t kVelodynePayloadBytes = 1206;
 constexpr int kBlocksPerPacket = 12;
 constexpr int kLasersPerBlock = 32;
 
