@@ -1,16 +1,22 @@
 // libFuzzer target: whole gRPC calls into a live FusionServer (issue 8: "protobuf messages into
-// the service handlers"). One server is started per process on loopback with an in-memory store;
+// the service handlers"). One server is started per process on loopback with a store file of its own;
 // each input is one call: which RPC, which credential, then up to eight length-prefixed request
 // messages (a sensor stream takes them all, a unary call the first). The service, core and
 // validation code is compiled into this target with the sanitizers, so a crash, leak or undefined
 // behaviour anywhere from the wire to the scene state is a finding.
 //
-// Input layout: byte 0 = RPC (mod 10), byte 1 = credential (mod 5: none, sensor, viewer, admin,
+// The server records (issue 18) into a folder of this process, so Replay and RecordedSpans read
+// back what the fuzzed sensor streams wrote; the avatar calls (issue 17) reach the store.
+//
+// Input layout: byte 0 = RPC (mod 15), byte 1 = credential (mod 5: none, sensor, viewer, admin,
 // garbage), then repeated [u16 little-endian length][bytes].
+#include <unistd.h>
+
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -41,13 +47,21 @@ Harness& Get() {
     auto* h = new Harness;
     ave::ServerOptions options;
     options.listen_address = "127.0.0.1:0";
-    options.store_path = ":memory:";
     options.sensor_token = kSensorToken;
     options.viewer_token = kViewerToken;
     options.admin_token = kAdminToken;
     options.seed_campus = true;
     options.campus_grid_m = 16;  // a small static model keeps GetStaticModel quick
     options.auth_limit.max_failures = 0;  // inputs with bad tokens must not lock the harness's own peer out
+    // Recording needs a store file (the index lives there): both go in a folder of this process.
+    static const std::filesystem::path folder =
+        std::filesystem::temp_directory_path() / ("ave_fuzz_grpc_" + std::to_string(::getpid()));
+    std::filesystem::remove_all(folder);
+    std::filesystem::create_directories(folder);
+    std::atexit([] { std::filesystem::remove_all(folder); });
+    options.store_path = (folder / "store.sqlite").string();
+    options.record_dir = (folder / "record").string();
+    options.record_max_bytes = int64_t{64} << 20;  // the budget's retention keeps a long run's disk bounded
     absl::StatusOr<std::unique_ptr<ave::FusionServer>> server = ave::FusionServer::Start(options);
     if (!server.ok()) {
       fprintf(stderr, "fuzz harness: server did not start: %s\n", server.status().ToString().c_str());
@@ -140,7 +154,7 @@ void Drain(Reader& reader, Message& message, int max_messages) {
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (size < 2) return 0;
   Harness& h = Get();
-  const int rpc = data[0] % 10;
+  const int rpc = data[0] % 15;
   const int credential = data[1] % 5;
   const std::vector<std::string> chunks = Chunks(data + 2, size - 2);
   grpc::ClientContext context;
@@ -206,10 +220,53 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       if (ParseFirst(chunks, &request)) (void)h.admin->RevokeToken(&context, request, &out);
       break;
     }
-    default: {
+    case 9: {
       ave::v1::ListTokensRequest request;
       ave::v1::ListTokensResponse out;
       (void)h.admin->ListTokens(&context, request, &out);
+      break;
+    }
+    case 10: {
+      ave::v1::ReplayRequest request;
+      if (!ParseFirst(chunks, &request)) return 0;
+      context.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(200));
+      auto reader = h.scene->Replay(&context, request);
+      ave::v1::SceneUpdate update;
+      Drain(reader, update, 4);
+      context.TryCancel();
+      (void)reader->Finish();
+      break;
+    }
+    case 11: {
+      ave::v1::RecordedSpansRequest request;
+      ave::v1::RecordedSpansResponse out;
+      if (ParseFirst(chunks, &request)) (void)h.scene->RecordedSpans(&context, request, &out);
+      break;
+    }
+    case 12: {
+      ave::v1::AvatarSequenceRequest request;
+      if (!ParseFirst(chunks, &request)) return 0;
+      auto reader = h.scene->GetAvatarSequence(&context, request);
+      ave::v1::AvatarSequenceChunk chunk;
+      Drain(reader, chunk, 1 << 16);
+      (void)reader->Finish();
+      break;
+    }
+    case 13: {
+      ave::v1::AvatarSequenceInfo out;
+      auto writer = h.admin->PutAvatarSequence(&context, &out);
+      for (const std::string& bytes : chunks) {
+        ave::v1::AvatarSequenceChunk chunk;
+        if (!chunk.ParseFromString(bytes) || !writer->Write(chunk)) break;
+      }
+      writer->WritesDone();
+      (void)writer->Finish();
+      break;
+    }
+    default: {
+      ave::v1::ListAvatarSequencesRequest request;
+      ave::v1::ListAvatarSequencesResponse out;
+      (void)h.admin->ListAvatarSequences(&context, request, &out);
       break;
     }
   }

@@ -10,6 +10,7 @@ import subprocess
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 OUT = os.path.join(ROOT, "fusion_server", "fuzz", "corpus", "grpc_services")
 JPEG = open(os.path.join(ROOT, "fusion_server", "fuzz", "corpus", "jpeg_header", "baseline_64x48"), "rb").read()
+AVATAR = open(os.path.join(ROOT, "fusion_server", "fuzz", "corpus", "avatar_blob", "walk_2frames"), "rb").read()
 
 
 def encode(message_type, text):
@@ -25,8 +26,12 @@ def call(rpc, credential, *messages):
     return out
 
 
+def octal(data):
+    return "".join("\\%03o" % b for b in data)
+
+
 def jpeg_text():
-    return "".join("\\%03o" % b for b in JPEG)
+    return octal(JPEG)
 
 
 HELLO = encode("SensorMessage", 'hello { camera_id: "fz" token: "t" software_version: "seed" '
@@ -53,6 +58,15 @@ SEEDS = {
     "revoke_token": call(8, 3, encode("RevokeTokenRequest", 'token_id: "0123456789ab"')),
     "list_tokens": call(9, 3, b""),
     "no_credential": call(3, 0, encode("AddCameraRequest", 'camera { id: "c3" }')),
+    # Issue 18: the server under the fuzzer records, so a replay can find the seed stream's frame.
+    "replay": call(10, 2, encode("ReplayRequest", 'viewer_id: "v" start_time_ns: 1 end_time_ns: 9000000000000000000 '
+                                 'rate: 16 include_jpeg: true max_updates: 4')),
+    "recorded_spans": call(11, 2, encode("RecordedSpansRequest", 'camera_ids: "fz" merge_gap_ns: 1000000000')),
+    # Issue 17: avatar sequences, put by an admin in one chunk, fetched and listed.
+    "put_avatar": call(13, 3, encode("AvatarSequenceChunk", 'name: "seed-walk" chunk_index: 0 chunk_count: 1 '
+                                     'total_bytes: %d data: "%s"' % (len(AVATAR), octal(AVATAR)))),
+    "get_avatar": call(12, 2, encode("AvatarSequenceRequest", 'name: "seed-walk"')),
+    "list_avatars": call(14, 3, b""),
 }
 
 os.makedirs(OUT, exist_ok=True)
