@@ -121,6 +121,14 @@ expect_error "viewer --record under a file" "--record $tmp/junk/rec" "${V[@]}" -
 expect_error "viewer --tls-ca missing" "$missing/ca.pem" "${V[@]}" --snapshot "$tmp/x.png" --tls-ca "$missing/ca.pem"
 expect_error "viewer --size 0x0" "size must be" "${V[@]}" --snapshot "$tmp/x.png" --size 0x0
 expect_error "viewer --max-rate nan" "max rate" "${V[@]}" --snapshot "$tmp/x.png" --max-rate nan
+# Replay flags (issue 18); each refused before any connection is tried.
+expect_error "viewer --replay-from alone" "--replay-from and --replay-to go together" "${V[@]}" --snapshot "$tmp/x.png" --replay-from -60
+expect_error "viewer --replay-to before --replay-from" "--replay-to must be after --replay-from" "${V[@]}" --snapshot "$tmp/x.png" --replay-from -10 --replay-to -60
+expect_error "viewer --replay-rate 32" "--replay-rate must be 0.25 .. 16" "${V[@]}" --snapshot "$tmp/x.png" --replay-from -60 --replay-to 0 --replay-rate 32
+expect_error "viewer --video without replay" "--video needs --headless and --replay-from / --replay-to" "${V[@]}" --record "$tmp/rec" --video "$tmp/v.mkv"
+expect_error "viewer --video-fps 0" "--video-fps must be 1 .. 120" "${V[@]}" --record "$tmp/rec" --replay-from -60 --replay-to 0 --video "$tmp/v.mkv" --video-fps 0
+expect_error "viewer --video .mp4" "must end in .mkv or .avi" "${V[@]}" --record "$tmp/rec" --replay-from -60 --replay-to 0 --video "$tmp/v.mp4"
+expect_error "viewer --video folder missing" "--video $missing/v.mkv: no folder $missing" "${V[@]}" --record "$tmp/rec" --replay-from -60 --replay-to 0 --video "$missing/v.mkv"
 expect_error "model build --input missing" "$missing/x.las" "$bin/ave-model" build --input "$missing/x.las"
 expect_error "model build --input not a PCD" "$tmp/junk.pcd: header line 1" "$bin/ave-model" build --input "$tmp/junk.pcd"
 expect_error "model build --input unknown extension" "unknown point cloud extension" "$bin/ave-model" build --input "$tmp/junk"

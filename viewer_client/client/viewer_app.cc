@@ -57,6 +57,9 @@ std::string ViewerOptions::Check() const {
     return "--video needs --headless and --replay-from / --replay-to";
   }
   if (!video_path.empty() && !(video_fps >= 1 && video_fps <= 120)) return "--video-fps must be 1 .. 120";
+  if (!video_path.empty() && !video_path.ends_with(".mkv") && !video_path.ends_with(".avi")) {
+    return "--video " + video_path + ": must end in .mkv or .avi (Motion-JPEG)";
+  }
   if (!depth_path.empty() && !headless && snapshot_path.empty()) return "--depth needs --headless or --snapshot";
   if (!(timeout_s > 0)) return "timeout must be > 0";
   if (!(max_rate_hz > 0)) return "max rate must be > 0";
@@ -650,7 +653,7 @@ absl::Status RunViewer(const ViewerOptions& options) {
   }
   // Output files are written at the end: a missing folder is said now, not after the whole run.
   for (const auto& [flag, path] : {std::pair<const char*, const std::string&>{"--snapshot", options.snapshot_path},
-                                   {"--depth", options.depth_path}}) {
+                                   {"--depth", options.depth_path}, {"--video", options.video_path}}) {
     const std::filesystem::path parent = std::filesystem::path(path).parent_path();
     if (!path.empty() && !parent.empty() && !std::filesystem::is_directory(parent)) {
       return absl::NotFoundError(absl::StrCat("viewer: ", flag, " ", path, ": no folder ", parent.string()));
