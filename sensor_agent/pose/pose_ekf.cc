@@ -179,6 +179,57 @@ bool PoseEkf::AddLandmark(int64_t id, const Eigen::Vector3d& point_in_world, con
   return true;
 }
 
+bool PoseEkf::AddLandmarkOnRay(int64_t id, const PinholeIntrinsics& k, const Eigen::Vector2d& uv, double depth_m, double depth_sigma_m,
+                               double pixel_sigma_px) {
+  if (LandmarkIndex(id) >= 0 || !uv.allFinite() || !(std::isfinite(depth_m) && depth_m > kMinDepth_m) ||
+      !(std::isfinite(depth_sigma_m) && depth_sigma_m > 0) || !(std::isfinite(pixel_sigma_px) && pixel_sigma_px > 0)) {
+    return false;
+  }
+  // x = p + R c, c = depth (m_x, m_y, 1), m = K^-1 uv. Under the world-frame orientation error
+  // (R = Exp(dtheta) R): dx/dp = I, dx/ddtheta = -[R c]x, dx/duv = R depth diag(1/fx, 1/fy), dx/ddepth = R m.
+  const Eigen::Matrix3d R = q_.toRotationMatrix();
+  const Eigen::Vector3d m((uv.x() - k.cx) / k.fx, (uv.y() - k.cy) / k.fy, 1.0);
+  const Eigen::Vector3d rc = R * (depth_m * m);
+  const Eigen::Vector3d point = p_ + rc;
+  Eigen::Matrix<double, 3, 12> Jx = Eigen::Matrix<double, 3, 12>::Zero();
+  Jx.block<3, 3>(0, kPos).setIdentity();
+  Jx.block<3, 3>(0, kRot) = -Skew(rc);
+  Eigen::Matrix<double, 3, 2> Juv;
+  Juv << R.col(0) * (depth_m / k.fx), R.col(1) * (depth_m / k.fy);
+  const Eigen::Vector3d Jd = R * m;
+  const Eigen::Matrix3d c = Jx * P_ * Jx.transpose() + pixel_sigma_px * pixel_sigma_px * Juv * Juv.transpose() +
+                            depth_sigma_m * depth_sigma_m * Jd * Jd.transpose();
+  const int n = static_cast<int>(landmark_ids_.size()) * 3;
+  Eigen::MatrixXd with_others;  // 3 x 3N: covariance of the new point with the landmarks already in the state
+  if (n > 0) with_others = Jx * cross_;
+  landmark_ids_.push_back(id);
+  landmarks_.conservativeResize(n + 3);
+  landmarks_.segment<3>(n) = point;
+  cross_.conservativeResize(12, n + 3);
+  cross_.middleCols<3>(n) = P_ * Jx.transpose();
+  Eigen::MatrixXd grown(n + 3, n + 3);
+  grown.topLeftCorner(n, n) = landmark_cov_;
+  if (n > 0) {
+    grown.bottomLeftCorner(3, n) = with_others;
+    grown.topRightCorner(n, 3) = with_others.transpose();
+  }
+  grown.bottomRightCorner<3, 3>() = 0.5 * (c + c.transpose());
+  landmark_cov_ = std::move(grown);
+  return true;
+}
+
+Eigen::MatrixXd PoseEkf::FullCovariance() const {
+  const int n = static_cast<int>(landmark_ids_.size()) * 3;
+  Eigen::MatrixXd full(12 + n, 12 + n);
+  full.topLeftCorner<12, 12>() = P_;
+  if (n > 0) {
+    full.topRightCorner(12, n) = cross_;
+    full.bottomLeftCorner(n, 12) = cross_.transpose();
+    full.bottomRightCorner(n, n) = landmark_cov_;
+  }
+  return full;
+}
+
 void PoseEkf::RemoveLandmark(int64_t id) {
   const int i = LandmarkIndex(id);
   if (i < 0) return;
@@ -204,15 +255,15 @@ std::optional<std::pair<Eigen::Vector3d, Eigen::Matrix3d>> PoseEkf::Landmark(int
   return std::make_pair(Eigen::Vector3d(landmarks_.segment<3>(3 * i)), Eigen::Matrix3d(landmark_cov_.block<3, 3>(3 * i, 3 * i)));
 }
 
-UpdateResult PoseEkf::UpdateLandmark(const PinholeIntrinsics& k, int64_t id, const Eigen::Vector2d& uv) {
+UpdateResult PoseEkf::UpdateLandmark(const PinholeIntrinsics& k, int64_t id, const Eigen::Vector2d& uv, double extra_variance_px2) {
   const int i = LandmarkIndex(id);
-  if (i < 0 || !uv.allFinite()) return {Rejection::kNotFinite, 0};
+  if (i < 0 || !uv.allFinite() || !std::isfinite(extra_variance_px2)) return {Rejection::kNotFinite, 0};
   Eigen::Matrix<double, 2, 12> Hp;
   const std::optional<Eigen::Vector2d> predicted = ProjectPoint(k, landmarks_.segment<3>(3 * i), &Hp);
   if (!predicted) return {Rejection::kBehindCamera, 0};
   const Eigen::Matrix<double, 2, 3> Hl = -Hp.block<2, 3>(0, kPos);  // d pixel / d point = - d pixel / d camera position
   const Eigen::Vector2d innovation = uv - *predicted;
-  const Eigen::Matrix2d R = Eigen::Matrix2d::Identity() * options_.pixel_sigma_px * options_.pixel_sigma_px;
+  const Eigen::Matrix2d R = Eigen::Matrix2d::Identity() * (options_.pixel_sigma_px * options_.pixel_sigma_px + std::max(0.0, extra_variance_px2));
   // P H' for the pose rows and the landmark rows.
   const Eigen::Matrix<double, 12, 2> PHt = P_ * Hp.transpose() + cross_.middleCols<3>(3 * i) * Hl.transpose();
   const Eigen::Matrix<double, Eigen::Dynamic, 2> LHt = cross_.transpose() * Hp.transpose() + landmark_cov_.middleCols<3>(3 * i) * Hl.transpose();

@@ -35,7 +35,10 @@ using Matrix6d = Eigen::Matrix<double, 6, 6>;
 inline constexpr int kPos = 0, kVel = 3, kRot = 6, kRate = 9;
 
 struct PoseFilterOptions {
-  double accel_noise_m_s2 = 1.0;        // white acceleration PSD sqrt (m/s^2/sqrt(Hz)), walking
+  // White acceleration PSD sqrt (m/s^2/sqrt(Hz)). Issue 19: 1.0 made the vision-locked filter
+  // overconfident (NEES in band 60 %, all misses above the band): a walker's gait bobs and sways the
+  // camera by more; 3.0 gives 82 % in band and a lower p95 (docs/BENCHMARKS.md, Pose).
+  double accel_noise_m_s2 = 3.0;
   double angular_accel_noise_rad_s2 = 1.0;  // white angular acceleration (rad/s^2/sqrt(Hz))
   double gps_min_sigma_m = 0.3;         // floor of the GPS sigma: multipath is not in the reported covariance
   double orientation_sigma_deg = 2.0;   // AHRS orientation sigma (AVE §5: 1-3°)
@@ -108,14 +111,27 @@ class PoseEkf {
   // the pose, so its observations correct pose and point jointly (SLAM-style EKF; docs/POSE.md).
   // `id` is the caller's; returns false (nothing added) for a duplicate id or a covariance that is
   // not finite and positive definite.
+  // Only for a point estimated independently of this filter's pose (it joins uncorrelated); a point
+  // computed from the filter's own pose must use AddLandmarkOnRay, which keeps the cross terms.
   bool AddLandmark(int64_t id, const Eigen::Vector3d& point_in_world, const Eigen::Matrix3d& covariance);
+  // A point initialised from the current pose (issue 19): seen at ideal pixel `uv` (sigma
+  // `pixel_sigma_px`) at depth `depth_m` (camera z, sigma `depth_sigma_m`, estimated from the relative
+  // motion and taken as independent of the pose). Its estimate p + R (K^-1 uv) depth is a function
+  // of the pose estimate, so it joins with the pose's covariance propagated through that function
+  // and with the cross-covariances J P (pose) and J P_pl (other landmarks); without them the pose
+  // would learn from the point what the point learnt from the pose (overconfident, biased).
+  bool AddLandmarkOnRay(int64_t id, const PinholeIntrinsics& k, const Eigen::Vector2d& uv, double depth_m, double depth_sigma_m,
+                        double pixel_sigma_px);
   void RemoveLandmark(int64_t id);  // marginalises it out (no-op for an unknown id)
   bool HasLandmark(int64_t id) const { return LandmarkIndex(id) >= 0; }
   int landmark_count() const { return static_cast<int>(landmark_ids_.size()); }
   // Estimate and covariance of a landmark; nullopt for an unknown id.
   std::optional<std::pair<Eigen::Vector3d, Eigen::Matrix3d>> Landmark(int64_t id) const;
   // A landmark seen at pixel `uv`: updates pose and every landmark (2x(12+3N) Jacobian).
-  UpdateResult UpdateLandmark(const PinholeIntrinsics& k, int64_t id, const Eigen::Vector2d& uv);
+  // `extra_variance_px2` adds to the pixel noise (e.g. a KLT track whose error persists).
+  UpdateResult UpdateLandmark(const PinholeIntrinsics& k, int64_t id, const Eigen::Vector2d& uv, double extra_variance_px2 = 0);
+  // Covariance of the full state [pose error (12), landmarks (3N)] (for tests and NEES).
+  Eigen::MatrixXd FullCovariance() const;
 
   Rigid3d world_from_camera() const { return Rigid3d(q_, p_); }
   const Eigen::Vector3d& velocity() const { return v_; }

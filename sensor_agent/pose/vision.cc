@@ -15,6 +15,7 @@
 
 #include "model_store/common/cpu_clock.h"
 #include "model_store/geometry/bvh.h"
+#include "sensor_agent/pose/feature_depth.h"
 #include "sensor_agent/pose/vision_match.h"
 
 namespace ave::pose {
@@ -22,16 +23,23 @@ namespace {
 
 using namespace internal;  // NOLINT: the front end's own helpers
 
-// An a priori unknown point: its pixel track and its 3D estimate (local frame) with covariance.
+// An a priori unknown point: its pixel track and its 3D estimate (local frame) with covariance:
+// anchored inverse depth (feature_depth.h) until it joins the pose filter's state, then the state's.
 struct Track {
   cv::Point2f px;                                  // in the (distorted) frame, for KLT
   Eigen::Vector2d uv = Eigen::Vector2d::Zero();    // the same, undistorted (ideal pinhole)
-  Eigen::Vector3d point = Eigen::Vector3d::Zero();
+  AnchoredPoint structure;
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();  // current estimate (structure's or the state's)
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Identity();
   int observations = 0;
   int64_t id = 0;  // landmark id in the pose filter's state (joint mode)
   double LargestSigma() const {
     return std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(covariance, Eigen::EigenvaluesOnly).eigenvalues().maxCoeff()));
+  }
+  void Sync() {
+    point = structure.Point();
+    covariance = structure.PointCovariance();
+    observations = structure.observations;
   }
 };
 
@@ -65,11 +73,14 @@ std::string VisionOptions::Check() const {
   if (max_new_points < 0) return "max_new_points must be >= 0";
   if (max_state_points < 0) return "max_state_points must be >= 0";
   if (!(new_point_sigma_m > 0) || !(new_point_prior_depth_m > 0)) return "new_point_sigma_m and new_point_prior_depth_m must be > 0";
+  if (!(new_point_inverse_depth_sigma > 0)) return "new_point_inverse_depth_sigma must be > 0";
+  if (new_point_min_observations < 1) return "new_point_min_observations must be >= 1";
   if (keyframe_interval < 1) return "keyframe_interval must be >= 1";
   if (min_tracked_known < 0) return "min_tracked_known must be >= 0";
   if (lock_frames < 0) return "lock_frames must be >= 0";
   if (lost_frames < 0 || !(lost_orientation_sigma_deg >= 0)) return "lost_frames and lost_orientation_sigma_deg must be >= 0";
   if (!(tracked_sigma_px >= 0)) return "tracked_sigma_px must be >= 0";
+  if (!(landmark_sigma_px >= 0)) return "landmark_sigma_px must be >= 0";
   if (!(weak_lock_gated_share >= 0 && weak_lock_gated_share <= 1)) return "weak_lock_gated_share must be in [0, 1]";
   if (!(lock_sigma_px > 0)) return "lock_sigma_px must be > 0";
   if (!(visibility_cache_m >= 0)) return "visibility_cache_m must be >= 0";
@@ -252,38 +263,19 @@ struct VisionTracker::Impl {
   // The 3D estimate of an unknown point after one more observation `uv` from the filter's pose.
   // Returns false when the observation disagrees (the track is then dropped).
   bool RefineTrack(Track& t, const PoseEkf& ekf, const Eigen::Vector2d& uv) const {
-    Eigen::Matrix<double, 2, 12> J;
-    const std::optional<Eigen::Vector2d> h = ekf.ProjectPoint(k, t.point, &J);
-    if (!h) return false;
-    // d pixel / d point = - d pixel / d camera position.
-    const Eigen::Matrix<double, 2, 3> H = -J.block<2, 3>(0, kPos);
-    const double sigma = ekf.options().pixel_sigma_px;
-    const Eigen::Matrix2d R = Eigen::Matrix2d::Identity() * sigma * sigma + J * ekf.covariance() * J.transpose();
-    const Eigen::Matrix2d S = H * t.covariance * H.transpose() + R;
-    const Eigen::Vector2d innovation = uv - *h;
-    const Eigen::LDLT<Eigen::Matrix2d> ldlt(S);
-    if (ldlt.info() != Eigen::Success || innovation.dot(ldlt.solve(innovation)) > ekf.options().gate_chi2_2dof) return false;
-    const Eigen::Matrix<double, 3, 2> K = ldlt.solve(H * t.covariance).transpose();
-    const Eigen::Matrix3d I_KH = Eigen::Matrix3d::Identity() - K * H;
-    t.point += K * innovation;
-    t.covariance = I_KH * t.covariance * I_KH.transpose() + K * R * K.transpose();
-    t.covariance = (0.5 * (t.covariance + t.covariance.transpose())).eval();
-    ++t.observations;
+    if (!RefineAnchoredPoint(t.structure, ekf, k, uv)) return false;
+    t.Sync();
     return t.point.allFinite();
   }
 
   Track NewTrack(const PoseEkf& ekf, const cv::Point2f& px, const Eigen::Vector2d& uv) {
-    const Rigid3d pose = ekf.world_from_camera();
-    const Eigen::Vector3d ray = pose.rotation * PixelRay(k, uv);
-    const double d0 = options.new_point_prior_depth_m;
-    const double across = d0 * 2.0 / k.fx;  // two pixels at the prior depth
     Track t;
     t.id = next_track_id++;
     t.px = px;
     t.uv = uv;
-    t.point = pose.translation + d0 * ray;
-    const Eigen::Matrix3d along = ray * ray.transpose();
-    t.covariance = d0 * d0 * along + across * across * (Eigen::Matrix3d::Identity() - along);
+    t.structure = StartAnchoredPoint(ekf.world_from_camera(), k, uv, ekf.options().pixel_sigma_px, options.new_point_prior_depth_m,
+                                     options.new_point_inverse_depth_sigma);
+    t.Sync();
     return t;
   }
 };
@@ -583,7 +575,7 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
       for (size_t i = 0; i < m.tracks.size(); ++i) {
         Track& t = m.tracks[i];
         if (!ekf.HasLandmark(t.id)) continue;
-        const UpdateResult r = ekf.UpdateLandmark(m.k, t.id, t.uv);
+        const UpdateResult r = ekf.UpdateLandmark(m.k, t.id, t.uv, m.options.landmark_sigma_px * m.options.landmark_sigma_px);
         Count(r, stats.new_points_used, stats);
         if (!r.accepted()) {
           ekf.RemoveLandmark(t.id);
@@ -600,7 +592,7 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
     }
     for (Track& t : m.tracks) {
       if (budget <= 0 || !m.options.new_points_in_pose || m.options.joint_new_points) break;
-      if (t.observations < 5 || t.LargestSigma() > m.options.new_point_sigma_m) continue;
+      if (t.observations < m.options.new_point_min_observations || t.LargestSigma() > m.options.new_point_sigma_m) continue;
       Eigen::Matrix<double, 2, 12> J;
       if (!ekf.ProjectPoint(m.k, t.point, &J)) continue;
       const Eigen::Matrix<double, 2, 3> H = -J.block<2, 3>(0, kPos);
@@ -621,8 +613,16 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
     if (m.options.joint_new_points) {  // converged features join the state while there is room
       for (const Track& t : m.tracks) {
         if (ekf.landmark_count() >= m.options.max_state_points) break;
-        if (ekf.HasLandmark(t.id) || t.observations < 5 || t.LargestSigma() > m.options.new_point_sigma_m) continue;
-        ekf.AddLandmark(t.id, t.point, t.covariance);
+        if (ekf.HasLandmark(t.id) || t.observations < m.options.new_point_min_observations || t.LargestSigma() > m.options.new_point_sigma_m) continue;
+        // The point is placed on this frame's ray from this frame's pose, at the depth the anchored
+        // filter found, with the cross-covariances that placement implies (the issue-19 bug was
+        // joining with none: the pose then re-learnt its own error from the point).
+        double depth = 0, depth_sigma = 0;
+        if (!DepthFromPose(t.structure, ekf, depth, depth_sigma)) continue;
+        if (ekf.AddLandmarkOnRay(t.id, m.k, t.uv, depth, depth_sigma, ekf.options().pixel_sigma_px)) {
+          const auto l = ekf.Landmark(t.id);
+          stats.landmarks_joined.push_back({l->first, l->second, t.uv});
+        }
       }
     }
     // New tracks only where the tracked set (known and unknown) is thin: a grid mask.
@@ -659,7 +659,8 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
       }
     }
     stats.new_points_tracked = static_cast<int>(m.tracks.size());
-    for (const Track& t : m.tracks) stats.new_points_converged += t.observations >= 5 && t.LargestSigma() <= m.options.new_point_sigma_m;
+    stats.landmarks_in_state = ekf.landmark_count();
+    for (const Track& t : m.tracks) stats.new_points_converged += t.observations >= m.options.new_point_min_observations && t.LargestSigma() <= m.options.new_point_sigma_m;
     timer.Lap(kStageUnknown);
   }
   if (keyframe) m.keyframe_pyramid = pyramid;  // shares the pixels

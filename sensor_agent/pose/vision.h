@@ -53,9 +53,12 @@ struct VisionOptions {
   // time; their observations then correct the pose without the drift above (issue 19).
   bool joint_new_points = false;
   int max_state_points = 15;
+  double landmark_sigma_px = 1.5;  // extra noise of a landmark's sighting (a frame-to-frame KLT track: its error persists)
   int max_new_points = 150;       // tracked unknown features kept
   double new_point_sigma_m = 0.3; // an unknown feature is used for pose once its largest sigma is below this
-  double new_point_prior_depth_m = 20;  // depth prior of a fresh unknown feature (sigma the same)
+  int new_point_min_observations = 5;  // ... and it has been seen this many times
+  double new_point_prior_depth_m = 20;  // depth prior of a fresh unknown feature (anchored inverse depth 1/20 per m ...)
+  double new_point_inverse_depth_sigma = 0.25;  // ... with this sigma (1/m): 2 sigma spans 1.8 m to infinity
 
   // Video-rate front end (issue 19). Between keyframes the known features matched on the last
   // keyframe are followed by KLT from the pose filter's prediction and update the filter directly;
@@ -113,6 +116,14 @@ struct VisionFrameStats {
   // Why measurements did not update the pose (counted per feature).
   int rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0;
   int klt_lost = 0;          // tracks KLT lost (status 0 or left the image)
+  int landmarks_in_state = 0;  // unknown features in the pose filter's state after this frame (joint mode)
+  // Unknown features that joined the state on this frame: estimate, covariance, ideal pixel.
+  struct JoinedLandmark {
+    Eigen::Vector3d point;
+    Eigen::Matrix3d covariance;
+    Eigen::Vector2d uv;
+  };
+  std::vector<JoinedLandmark> landmarks_joined;
   int unknown_dropped = 0;   // unknown features whose observation fell outside their gate
   // The fine pass's known-point matches (model point, detected pixel), e.g. for a PnP peer.
   std::vector<std::pair<Eigen::Vector3d, Eigen::Vector2d>> point_matches;

@@ -182,6 +182,15 @@ TEST(VisionOptions, CheckNamesTheBadField) {
   o = VisionOptions();
   o.detect_level = 7;
   EXPECT_THAT(o.Check(), ::testing::HasSubstr("detect_level"));
+  o = VisionOptions();
+  o.new_point_inverse_depth_sigma = 0;
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("new_point_inverse_depth_sigma"));
+  o = VisionOptions();
+  o.new_point_min_observations = 0;
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("new_point_min_observations"));
+  o = VisionOptions();
+  o.landmark_sigma_px = -1;
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("landmark_sigma_px"));
 }
 
 }  // namespace

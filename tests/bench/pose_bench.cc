@@ -30,6 +30,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "model_store/common/cpu_clock.h"
+#include "model_store/geometry/bvh.h"
 #include "sensor_agent/pose/pose_inputs.h"
 #include "sensor_agent/pose/so3.h"
 #include "sensor_agent/pose/vision.h"
@@ -54,6 +55,7 @@ struct PoseBenchOptions {
   double ahrs_correlation_s = 1.0;  // PoseFilterOptions::orientation_correlation_s
   bool knobs = true;     // the front end's knobs at 50 features
   bool variants = true;  // the bus and bump scenario variants (need --seconds >= 7.2)
+  bool consistency_knobs = true;  // the filter's noise model (pixel sigma, process noise) against NEES
 };
 
 struct Spread {
@@ -85,11 +87,18 @@ struct Row {
   double filter_ms = 0, detect_ms = 0, update_ms = 0, used = 0;
   int frames = 0;
   int matches = 0, matches_within_2px = 0;  // known-point matches and those within 2 px of the true projection
+  std::vector<double> match_error_key_px, match_error_tracked_px;  // their distance from the truth, keyframes / tracked frames
   std::array<double, pose::kVisionStageCount> stage_ms{};
   int keyframes = 0, weak_locks = 0, relocks = 0;
   int64_t rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0, klt_lost = 0, unknown_dropped = 0;
-  int nees_frames = 0, nees_in_band = 0;
+  int nees_frames = 0, nees_in_band = 0, nees_below = 0, nees_above = 0;
+  // Unknown features joining the state (joint mode), against the static mesh's point on the true
+  // ray through the same pixel: 3D error (m) and 3-dof NEES of their estimate.
+  std::vector<double> landmark_error_m, landmark_nees;
+  int landmarks_joined = 0;
+  double landmarks_in_state = 0;
   double nees_sum = 0;
+  std::vector<double> nees;  // per frame
   const Event* event = nullptr;
   std::vector<double> before_px, during_px, after_px;  // per-point errors in the event's windows
   double TotalMs() const { return (filter_ms + detect_ms + update_ms) / std::max(1, frames); }
@@ -265,6 +274,7 @@ int RunPose(const PoseBenchOptions& o) {
   }
   const double render_ms = std::chrono::duration<double, std::milli>(WallClock::now() - render_start).count() / n;
   const TriangleMesh mesh = scene::BuildStaticMesh(world, 2.0);
+  const MeshBvh bvh(mesh);
   const pose::FeatureMap map = pose::CampusFeatureMap(world);
   std::vector<std::vector<Eigen::Vector3d>> visible;
   {
@@ -282,6 +292,7 @@ int RunPose(const PoseBenchOptions& o) {
     std::string knob, key;
     std::function<void(pose::VisionOptions&)> tweak;
     const Event* event = nullptr;
+    std::function<void(pose::PoseFilterOptions&)> filter_tweak = nullptr;
   };
   const Event bus{"bus", 3.0, 6.0}, bump{"bump", 5.0, 5.2};
   std::vector<Run> runs;
@@ -301,11 +312,30 @@ int RunPose(const PoseBenchOptions& o) {
     add("never declared lost", "never_lost", [](pose::VisionOptions& v) { v.lost_frames = 0; });
     add("no unknown features", "no_unknown", [](pose::VisionOptions& v) { v.use_new_points = false; });
   }
+  if (o.consistency_knobs) {  // issue 19: the filter's noise model against NEES
+    auto add_filter = [&](const std::string& knob, const std::string& key, std::function<void(pose::PoseFilterOptions&)> tweak,
+                          std::function<void(pose::VisionOptions&)> vtweak = nullptr) {
+      runs.push_back({50, knob, "gps_imu_vision_50_" + key, std::move(vtweak), nullptr, std::move(tweak)});
+    };
+    add_filter("pixel sigma 2.0 px", "pixel_sigma_2", [](pose::PoseFilterOptions& f) { f.pixel_sigma_px = 2.0; });
+    add_filter("angular acceleration noise 3 rad/s2/sqrt(Hz)", "angular_accel_3", [](pose::PoseFilterOptions& f) { f.angular_accel_noise_rad_s2 = 3.0; });
+    add_filter("acceleration noise 1 m/s2/sqrt(Hz) (before issue 19)", "accel_1", [](pose::PoseFilterOptions& f) { f.accel_noise_m_s2 = 1.0; });
+    add_filter("acceleration noise 5 m/s2/sqrt(Hz)", "accel_5", [](pose::PoseFilterOptions& f) { f.accel_noise_m_s2 = 5.0; });
+  }
   if (o.new_points) {
     runs.push_back({50, "unknown points also correcting the pose (no cross-covariances, issue 5)", "gps_imu_vision_unknown_50",
                     [](pose::VisionOptions& v) { v.new_points_in_pose = true; }});
     runs.push_back({50, "unknown points in the state, cross-covariances kept", "gps_imu_vision_joint_50",
                     [](pose::VisionOptions& v) { v.joint_new_points = true; }});
+    runs.push_back({50, "unknown points in the state, landmark sightings at 3 px extra noise", "gps_imu_vision_joint_50_landmark_3px",
+                    [](pose::VisionOptions& v) {
+                      v.joint_new_points = true;
+                      v.landmark_sigma_px = 3.0;
+                    }});
+    runs.push_back({50, "unknown points in the state, joining after 15 sightings", "gps_imu_vision_joint_50_min15", [](pose::VisionOptions& v) {
+                      v.joint_new_points = true;
+                      v.new_point_min_observations = 15;
+                    }});
   }
   const bool variants = o.variants && o.seconds >= 7.2;
   if (variants) {
@@ -323,6 +353,7 @@ int RunPose(const PoseBenchOptions& o) {
     row.event = run.event;
     pose::PoseFilterOptions fo;
     fo.orientation_correlation_s = o.ahrs_correlation_s;
+    if (run.filter_tweak) run.filter_tweak(fo);
     pose::PoseTracker tracker(log, fo);
     pose::VisionOptions vo;
     vo.max_features = run.features;
@@ -360,10 +391,26 @@ int RunPose(const PoseBenchOptions& o) {
         row.relocks += s.relocks;
         row.rejected_gate += s.rejected_gate, row.rejected_behind += s.rejected_behind, row.rejected_not_finite += s.rejected_not_finite;
         row.klt_lost += s.klt_lost, row.unknown_dropped += s.unknown_dropped;
+        row.landmarks_in_state += s.landmarks_in_state;
+        for (const auto& l : s.landmarks_joined) {
+          ++row.landmarks_joined;
+          const Eigen::Vector3d ray = (frame_truth.rotation * PixelRay(k, l.uv)).normalized();
+          const std::optional<RayHit> hit = bvh.Raycast(frame_truth.translation, ray);
+          const Eigen::Vector3d c = frame_truth.Inverse() * l.point;
+          // Only where the mesh is what was seen (not a person, a tree or the bus): the true point
+          // within 1 m of the same depth along the ray.
+          if (!hit) continue;
+          const Eigen::Vector3d truth_point = frame_truth.translation + hit->distance_m * ray;
+          if (std::abs((frame_truth.Inverse() * truth_point).z() - c.z()) > 0.25 * c.z() + 1.0) continue;
+          const Eigen::Vector3d e = l.point - truth_point;
+          row.landmark_error_m.push_back(e.norm());
+          row.landmark_nees.push_back(e.dot(l.covariance.ldlt().solve(e)));
+        }
         for (const auto& [p, uv] : s.point_matches) {
           const auto true_uv = ProjectToPixel(k, frame_truth.Inverse() * p, 0.1);
           ++row.matches;
           row.matches_within_2px += true_uv && (*true_uv - uv).norm() <= 2.0;
+          if (true_uv) (s.keyframe ? row.match_error_key_px : row.match_error_tracked_px).push_back((*true_uv - uv).norm());
         }
         if (peer) {  // the peers: per-frame PnP on the same known-point matches
           for (int method = 0; method < 2; ++method) {
@@ -409,6 +456,9 @@ int RunPose(const PoseBenchOptions& o) {
       const double nees = PoseNees(frame_truth, current);
       ++row.nees_frames;
       row.nees_in_band += nees >= kNeesLow && nees <= kNeesHigh;
+      row.nees_below += nees < kNeesLow;
+      row.nees.push_back(nees);
+      row.nees_above += nees > kNeesHigh;
       row.nees_sum += std::min(nees, 1e6);
       if (run.event) {
         std::vector<double>* window = t_s >= run.event->start_s - run.event->before_s && t_s < run.event->start_s ? &row.before_px
@@ -500,6 +550,22 @@ int RunPose(const PoseBenchOptions& o) {
                 static_cast<long long>(r.rejected_behind), static_cast<long long>(r.rejected_not_finite), static_cast<long long>(r.klt_lost),
                 static_cast<long long>(r.unknown_dropped), r.weak_locks, r.relocks);
   }
+  std::printf("\nNEES of the pose per frame against the chi2(6) 95 %% band [%.2f, %.2f] (below: the covariance is too large; above: too small),"
+              " and unknown features joining the state vs the static mesh's point on the true ray:\n"
+              "| mode | in band | below | above | mean NEES | median NEES | known-point match error vs truth, keyframes: median (p95) px | tracked: median (p95) px | landmarks in state (mean) | joined | with mesh truth | median error m | p95 error m | landmark NEES mean (3 dof) | landmark NEES <= 7.81 |\n"
+              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n", kNeesLow, kNeesHigh);
+  for (const Row& r : rows) {
+    if (r.nees_frames == 0) continue;
+    const double f = r.nees_frames;
+    double lm_nees = 0;
+    int lm_in = 0;
+    for (double x : r.landmark_nees) lm_nees += x / std::max<size_t>(1, r.landmark_nees.size()), lm_in += x <= 7.81;
+    const Spread le = SpreadOf(r.landmark_error_m);
+    const Spread mk = SpreadOf(r.match_error_key_px), mt = SpreadOf(r.match_error_tracked_px);
+    std::printf("| %s | %.0f %% | %.0f %% | %.0f %% | %.1f | %.1f | %.2f (%.2f) | %.2f (%.2f) | %.1f | %d | %zu | %.2f | %.2f | %.1f | %.0f %% |\n", RowName(r).c_str(), 100 * r.nees_in_band / f,
+                100 * r.nees_below / f, 100 * r.nees_above / f, r.nees_sum / f, SpreadOf(r.nees).median, mk.median, mk.p95, mt.median, mt.p95, r.landmarks_in_state / std::max(1, r.frames), r.landmarks_joined,
+                r.landmark_error_m.size(), le.median, le.p95, lm_nees, r.landmark_nees.empty() ? 0.0 : 100.0 * lm_in / r.landmark_nees.size());
+  }
   std::printf("\nscenario variants, misregistration median px (p95) in the windows around the event:\n| variant | 1 s before | during | 1 s after |\n| --- | ---: | ---: | ---: |\n");
   for (const Row& r : rows) {
     if (!r.event) continue;
@@ -554,6 +620,7 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--ahrs-correlation", o->ahrs_correlation_s, "seconds over which AHRS errors are correlated (0: white, the issue-5 filter)")
       ->capture_default_str()
       ->check(ave::cli::Range(0, 1e6));
+  sub.add_option("--consistency-knobs", o->consistency_knobs, "rows for the filter's noise model (pixel sigma, process noise) against NEES")->capture_default_str();
   sub.add_option("--knobs", o->knobs, "rows for the video-rate front end's knobs (keyframe interval, visibility cache, detection level)")
       ->capture_default_str();
   sub.add_option("--variants", o->variants, "rows for the bus and 5-degree-bump scenario variants (need --seconds >= 7.2)")->capture_default_str();
