@@ -9,9 +9,10 @@ build=${AVE_FUZZ_BUILD:-$root/build-fuzz}
 seconds=${AVE_FUZZ_SECONDS:-20}
 CC=clang-14 CXX=clang++-14 cmake -S "$root" -B "$build" -G Ninja -DAVE_FUZZ=ON -DAVE_BUILD_TESTS=OFF \
   -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
-targets=(jpeg_header sensor_message mesh_blob avatar_blob scene_file grpc_services las_reader point_cloud intrinsics_file velodyne_pcap velodyne_udp velodyne_calibration)
+targets=(jpeg_header sensor_message mesh_blob avatar_blob scene_file grpc_services las_reader point_cloud intrinsics_file velodyne_pcap
+  velodyne_udp velodyne_calibration velodyne_udp_socket image_decode)
 # Each target's seeds live beside its source: <component>/fuzz/corpus/<target>.
-corpus_dirs=(fusion_server/fuzz/corpus sensor_agent/fuzz/corpus)
+corpus_dirs=(fusion_server/fuzz/corpus sensor_agent/fuzz/corpus viewer_client/fuzz/corpus)
 cmake --build "$build" --target "${targets[@]/#/ave_fuzz_}"
 for t in "${targets[@]}"; do
   work=$build/fuzz/corpus-$t

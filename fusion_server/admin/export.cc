@@ -7,6 +7,7 @@
 #include <opencv2/videoio.hpp>
 
 #include "absl/strings/str_cat.h"
+#include "model_store/image/image_decode.h"
 #include "ave/v1/ave.grpc.pb.h"
 #include "fusion_server/admin/admin_client.h"
 
@@ -53,8 +54,10 @@ absl::StatusOr<ExportResult> ExportClip(std::shared_ptr<grpc::Channel> channel, 
   }
   cv::VideoWriter writer;
   for (const auto& [t_ns, jpeg] : frames) {
-    const cv::Mat image = cv::imdecode(cv::Mat(1, static_cast<int>(jpeg.size()), CV_8U, const_cast<char*>(jpeg.data())),
-                                       cv::IMREAD_COLOR);
+    // Recorded bytes are a sensor's JPEG: the checked decoder (issue 14) refuses a size that
+    // disagrees with its header or is over the limits, counted as a gap like any undecodable one.
+    const absl::StatusOr<cv::Mat> decoded = image::DecodeImage(jpeg, image::Channels::kColor);
+    const cv::Mat image = decoded.ok() ? *decoded : cv::Mat();
     if (image.empty()) {
       ++result.gaps;
       continue;

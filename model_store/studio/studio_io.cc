@@ -9,6 +9,9 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "absl/strings/str_cat.h"
+#include "model_store/image/image_decode.h"
+
 namespace ave::studio {
 namespace {
 
@@ -104,8 +107,9 @@ absl::StatusOr<StudioCalibration> ReadStudioCalibration(const std::string& path)
 
 absl::StatusOr<Image> ReadColourPng(const std::string& path) {
   if (!std::filesystem::is_regular_file(path)) return absl::NotFoundError(path + ": missing");
-  const cv::Mat m = cv::imread(path, cv::IMREAD_COLOR);
-  if (m.empty()) return absl::NotFoundError(path + ": missing or not a readable image");
+  absl::StatusOr<cv::Mat> decoded = image::ReadImageFile(path, image::Channels::kColor);
+  if (!decoded.ok()) return absl::NotFoundError(absl::StrCat(decoded.status().message(), " (not a readable image)"));
+  const cv::Mat m = *std::move(decoded);
   Image img{m.cols, m.rows, std::vector<uint8_t>(static_cast<size_t>(m.cols) * m.rows * 3)};
   for (int r = 0; r < m.rows; ++r) std::copy_n(m.ptr<uint8_t>(r), m.cols * 3, img.bgr.begin() + static_cast<std::ptrdiff_t>(r) * m.cols * 3);
   return img;
@@ -113,8 +117,9 @@ absl::StatusOr<Image> ReadColourPng(const std::string& path) {
 
 absl::StatusOr<Mask> ReadMaskPng(const std::string& path) {
   if (!std::filesystem::is_regular_file(path)) return absl::NotFoundError(path + ": missing");
-  const cv::Mat m = cv::imread(path, cv::IMREAD_GRAYSCALE);
-  if (m.empty()) return absl::NotFoundError(path + ": missing or not a readable image");
+  absl::StatusOr<cv::Mat> decoded = image::ReadImageFile(path, image::Channels::kGray);
+  if (!decoded.ok()) return absl::NotFoundError(absl::StrCat(decoded.status().message(), " (not a readable image)"));
+  const cv::Mat m = *std::move(decoded);
   Mask mask{m.cols, m.rows, std::vector<uint8_t>(static_cast<size_t>(m.cols) * m.rows)};
   for (int r = 0; r < m.rows; ++r)
     for (int c = 0; c < m.cols; ++c) mask.data[static_cast<size_t>(r) * m.cols + c] = m.at<uint8_t>(r, c) >= 128 ? 255 : 0;

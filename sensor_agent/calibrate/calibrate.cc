@@ -13,6 +13,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "absl/strings/str_cat.h"
+#include "model_store/image/image_decode.h"
 
 namespace ave::calib {
 namespace {
@@ -76,11 +77,15 @@ absl::StatusOr<CalibrationResult> CalibrateFromImages(const std::vector<std::str
   std::vector<cv::Vec3d> normals;
   cv::Size size;
   for (const std::string& path : paths) {
-    const cv::Mat gray = cv::imread(path, cv::IMREAD_GRAYSCALE);
-    if (gray.empty()) {
-      result.skipped.push_back(path + ": not a readable image");
+    // Through the checked decoder (issue 14): JPEG or PNG, header size within limits, the reason kept.
+    absl::StatusOr<cv::Mat> decoded = image::ReadImageFile(path, image::Channels::kGray);
+    if (!decoded.ok()) {
+      std::string why(decoded.status().message());
+      if (why.rfind(path + ": ", 0) == 0) why = why.substr(path.size() + 2);
+      result.skipped.push_back(absl::StrCat(path, ": not a readable image (", why, ")"));
       continue;
     }
+    const cv::Mat gray = *std::move(decoded);
     if (size.area() > 0 && gray.size() != size) {
       return absl::InvalidArgumentError(absl::StrCat(path, ": image size ", gray.cols, "x", gray.rows, " differs from the first image's ",
                                                      size.width, "x", size.height));

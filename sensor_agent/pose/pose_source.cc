@@ -35,6 +35,8 @@ class FusedPoseSource final : public FrameSource {
   PinholeIntrinsics intrinsics() const override { return inner_->intrinsics(); }
   std::string description() const override { return inner_->description() + ", pose " + PoseModeName(mode_); }
   bool live() const override { return inner_->live(); }
+  int64_t drop_outs() const override { return inner_->drop_outs(); }
+  int64_t reconnects() const override { return inner_->reconnects(); }
 
  private:
   std::unique_ptr<FrameSource> inner_;

@@ -7,6 +7,7 @@
 #include <opencv2/videoio.hpp>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "model_store/scene/campus.h"
 #include "sensor_agent/sim/camera_effects.h"
 #include "sensor_agent/sim/scenario.h"
@@ -54,15 +55,41 @@ class SimScenarioSource final : public FrameSource {
 
 class VideoCaptureSource final : public FrameSource {
  public:
-  VideoCaptureSource(std::string spec, std::unique_ptr<cv::VideoCapture> capture, bool live,
+  VideoCaptureSource(std::string spec, std::unique_ptr<cv::VideoCapture> capture, bool live, bool network,
                      const SourceOptions& options)
-      : spec_(std::move(spec)), capture_(std::move(capture)), live_(live), options_(options) {}
+      : spec_(std::move(spec)), capture_(std::move(capture)), live_(live), network_(network), options_(options) {}
 
   absl::StatusOr<CapturedFrame> Next() override {
+    if (network_ && !capture_->isOpened()) {
+      // Down since a drop-out: one reconnection attempt per call (the agent waits between calls).
+      ++attempts_;
+      const double down_s = (WallNs() - down_since_ns_) * 1e-9;
+      if (!capture_->open(spec_, cv::CAP_FFMPEG) || !capture_->isOpened()) {
+        capture_->release();
+        return absl::UnavailableError(absl::StrFormat("%s: stream down for %.1f s after %d frames: reconnection attempt %d failed (cannot open)",
+                                                      spec_, down_s, count_, attempts_));
+      }
+      reconnected_pending_ = true;
+    }
     cv::Mat image;
     if (!capture_->read(image) || image.empty()) {
       if (!live_) return absl::OutOfRangeError(absl::StrCat(spec_, ": end of video after ", count_, " frames"));
-      return absl::UnavailableError(absl::StrCat(spec_, ": read failed after ", count_, " frames"));
+      if (!network_) return absl::UnavailableError(absl::StrCat(spec_, ": read failed after ", count_, " frames"));
+      // A drop-out (the server closed or cut the stream, the network failed): close it; the next
+      // call reconnects. A reopened stream that fails before any frame is still the same drop-out.
+      capture_->release();
+      if (!reconnected_pending_) {
+        ++drop_outs_;
+        attempts_ = 0;
+        down_since_ns_ = WallNs();
+      }
+      reconnected_pending_ = false;
+      return absl::UnavailableError(absl::StrCat(spec_, ": stream dropped after ", count_, " frames (drop-out ", drop_outs_,
+                                                 "); reconnecting"));
+    }
+    if (reconnected_pending_) {
+      reconnected_pending_ = false;
+      ++reconnects_;
     }
     if (image.channels() == 1) cv::cvtColor(image, image, cv::COLOR_GRAY2BGR);
     if (image.channels() == 4) cv::cvtColor(image, image, cv::COLOR_BGRA2BGR);
@@ -104,11 +131,19 @@ class VideoCaptureSource final : public FrameSource {
   }
   std::string description() const override { return spec_; }
   bool live() const override { return live_; }
+  int64_t drop_outs() const override { return drop_outs_; }
+  int64_t reconnects() const override { return reconnects_; }
 
  private:
   std::string spec_;
   std::unique_ptr<cv::VideoCapture> capture_;
   bool live_;
+  bool network_;  // rtsp://, http(s)://: reconnect after a drop-out
+  int64_t drop_outs_ = 0;
+  int64_t reconnects_ = 0;
+  int attempts_ = 0;               // reconnection attempts since the last drop-out
+  int64_t down_since_ns_ = 0;
+  bool reconnected_pending_ = false;  // reopened; counts as a reconnect once a frame arrives
   SourceOptions options_;
   PinholeIntrinsics intrinsics_;
   int64_t count_ = 0;
@@ -154,11 +189,13 @@ absl::StatusOr<std::unique_ptr<FrameSource>> OpenSource(const std::string& spec,
   }
   auto capture = std::make_unique<cv::VideoCapture>();
   bool live = true;
+  bool network = false;
   bool opened = false;
   if (StartsWith(spec, "file:")) {
     live = false;
     opened = capture->open(spec.substr(5));
   } else if (StartsWith(spec, "rtsp://") || StartsWith(spec, "http://") || StartsWith(spec, "https://")) {
+    network = true;
     opened = capture->open(spec, cv::CAP_FFMPEG);
   } else if (StartsWith(spec, "v4l2:")) {
     const std::string dev = spec.substr(5);
@@ -174,7 +211,7 @@ absl::StatusOr<std::unique_ptr<FrameSource>> OpenSource(const std::string& spec,
   if (!opened || !capture->isOpened()) {
     return absl::UnavailableError(absl::StrCat("source '", spec, "': cannot open"));
   }
-  return std::unique_ptr<FrameSource>(new VideoCaptureSource(spec, std::move(capture), live, options));
+  return std::unique_ptr<FrameSource>(new VideoCaptureSource(spec, std::move(capture), live, network, options));
 }
 
 }  // namespace ave

@@ -6,7 +6,8 @@
 //   sim:SCENARIO#CAMERA  a scenario camera through the simulator (bundled name or .yaml path;
 //                        its effects apply, moving cameras walk their path; true pose attached)
 //   file:/path/video.mp4 a video file (ends at its last frame)
-//   rtsp://host/stream   a network stream (also http://, https://)
+//   rtsp://host/stream   a network stream (also http://, https://, e.g. an MJPEG camera); a
+//                        drop-out (the read fails) closes it and the next Next() reconnects
 //   v4l2:/dev/video0     a local capture device (or v4l2:0)
 #include <cstdint>
 #include <memory>
@@ -42,6 +43,10 @@ class FrameSource {
   // True when the device delivers frames at its own rate (live cameras); false when the caller
   // must pace them (files, the simulator).
   virtual bool live() const = 0;
+  // Network streams (rtsp://, http(s)://): drop-outs seen (reads that failed after the stream
+  // delivered) and reconnections that delivered again; 0 for other sources.
+  virtual int64_t drop_outs() const { return 0; }
+  virtual int64_t reconnects() const { return 0; }
 };
 
 struct SourceOptions {

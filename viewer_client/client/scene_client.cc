@@ -67,29 +67,6 @@ int JpegReduction(int frame_width, int frame_height, int need_width, int need_he
   return reduction;
 }
 
-std::shared_ptr<const DecodedImage> DecodeJpeg(const std::string& jpeg, int reduction) {
-  if (jpeg.empty()) return nullptr;
-  const int flag = reduction >= 8 ? cv::IMREAD_REDUCED_COLOR_8
-                 : reduction >= 4 ? cv::IMREAD_REDUCED_COLOR_4
-                 : reduction >= 2 ? cv::IMREAD_REDUCED_COLOR_2
-                                  : cv::IMREAD_COLOR;
-  const cv::Mat bytes(1, static_cast<int>(jpeg.size()), CV_8UC1, const_cast<char*>(jpeg.data()));
-  cv::Mat bgr;
-  try {
-    bgr = cv::imdecode(bytes, flag);
-  } catch (const cv::Exception&) {
-    return nullptr;
-  }
-  if (bgr.empty()) return nullptr;
-  auto image = std::make_shared<DecodedImage>();
-  image->width = bgr.cols;
-  image->height = bgr.rows;
-  image->rgba.resize(size_t(bgr.cols) * bgr.rows * 4);
-  cv::Mat rgba(bgr.rows, bgr.cols, CV_8UC4, image->rgba.data());
-  cv::cvtColor(bgr, rgba, cv::COLOR_BGR2RGBA);
-  return image;
-}
-
 SceneClient::SceneClient(std::shared_ptr<grpc::Channel> channel, std::string viewer_token, std::string viewer_id)
     : channel_(std::move(channel)), token_(std::move(viewer_token)), viewer_id_(std::move(viewer_id)) {}
 
@@ -244,9 +221,12 @@ std::vector<CameraView> SceneClient::Snapshot() const {
   }
   std::map<std::string, std::shared_ptr<const DecodedImage>> decoded;
   for (const auto& [id, p] : pending) {  // decode outside the lock
-    decoded[id] = DecodeJpeg(*p.bytes, p.reduction);
+    absl::StatusOr<std::shared_ptr<const DecodedImage>> image = DecodeJpegFrame(*p.bytes, p.reduction);
     ++jpegs_decoded_;
-    if (!decoded[id]) AVE_LOG(WARNING) << "camera '" << id << "': undecodable JPEG (frame " << p.frame_sequence << ")";
+    if (!image.ok()) {
+      AVE_LOG(WARNING) << "camera '" << id << "': undecodable JPEG (frame " << p.frame_sequence << "): " << image.status().message();
+    }
+    decoded[id] = image.ok() ? *std::move(image) : nullptr;
   }
   std::lock_guard lock(mu_);
   for (auto& [id, image] : decoded) {

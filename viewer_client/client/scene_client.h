@@ -21,6 +21,7 @@
 #include "model_store/geometry/camera.h"
 #include "model_store/geometry/mesh.h"
 #include "model_store/geometry/rigid3.h"
+#include "viewer_client/client/decoded_image.h"
 #include "viewer_client/client/lidar_points.h"
 
 namespace grpc {
@@ -33,12 +34,6 @@ class LidarState;
 namespace ave::viewer {
 
 enum class CameraLiveness { kUnknown, kLive, kStale, kLost };
-
-struct DecodedImage {
-  int width = 0;
-  int height = 0;
-  std::vector<uint8_t> rgba;  // top row first
-};
 
 struct CameraView {
   std::string id;
@@ -154,8 +149,7 @@ ReplaySeek PlanSeek(int64_t seek_ns, int64_t now_ns, const RecordedSpans& spans,
 // need_width x need_height; 1 when either need is 0 or the frame size is unknown.
 int JpegReduction(int frame_width, int frame_height, int need_width, int need_height);
 
-// Decodes a JPEG at 1/`reduction` scale into RGBA; null when the bytes are not a JPEG OpenCV reads.
-std::shared_ptr<const DecodedImage> DecodeJpeg(const std::string& jpeg, int reduction = 1);
+// DecodeJpeg, DecodeJpegFrame: decoded_image.h.
 
 class SceneClient {
  public:

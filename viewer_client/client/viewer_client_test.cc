@@ -289,6 +289,12 @@ TEST(JpegDecode, DecodesRgbaAtTheReducedSizeAndRefusesGarbage) {
   }
   EXPECT_EQ(DecodeJpeg("not a jpeg"), nullptr);
   EXPECT_EQ(DecodeJpeg(""), nullptr);
+  // The reasons the viewer logs (issue 14: the checked decoder of model_store/image).
+  EXPECT_EQ(DecodeJpegFrame("not a jpeg").status().message(), "not a JPEG or PNG image (first bytes 6e 6f 74 20)");
+  std::vector<uint8_t> png;
+  ASSERT_TRUE(cv::imencode(".png", bgr, png));
+  EXPECT_EQ(DecodeJpegFrame(std::string(png.begin(), png.end())).status().message(), "a camera frame must be a JPEG, not a PNG");
+  EXPECT_NE(DecodeJpegFrame(jpeg.substr(0, 40)).status().message().find("truncated JPEG"), std::string::npos);
 }
 
 TEST(DataSelection, SmallMovesKeepTheSubscriptionLargeOnesRenewIt) {
