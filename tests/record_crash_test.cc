@@ -138,7 +138,9 @@ int64_t CheckIndexAgainstSegments(const fs::path& dir, bool tails_cut) {
       std::error_code ec;
       const auto size = fs::file_size(dir / "rec" / seg.path, ec);
       // The running server may have appended to its open segments since; closed ones are exact.
-      if (!ec && seg.closed) EXPECT_EQ(static_cast<int64_t>(size), seg.bytes) << seg.path;
+      if (!ec && seg.closed) {
+        EXPECT_EQ(static_cast<int64_t>(size), seg.bytes) << seg.path;
+      }
     }
   }
   return static_cast<int64_t>(rows->size());
