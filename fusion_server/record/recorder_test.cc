@@ -85,6 +85,34 @@ TEST(MergeSegmentIntervals, MergesCloseSegmentsPerSensorAndKeepsLongerBreaks) {
   EXPECT_EQ(MergeSegmentIntervals(segments, {}, 30)[0].intervals.size(), 1u);  // 60..90 is within 30
 }
 
+// The index's metadata is written field by field from the received frame (no copy): the same
+// bytes as serializing a copy of those fields, for frames with and without pose, boxes, offset.
+TEST(FrameMetaBytes, SameBytesAsSerializingACopyWithoutTheJpeg) {
+  auto full = TestFrame(7, 123456789, TestJpeg(1));
+  full->set_clock_offset_ns(-42);
+  v1::DetectedBox* box = full->add_boxes();
+  box->set_track_id(9);
+  box->set_score(0.5f);
+  for (int i = 0; i < 4; ++i) box->add_corners()->set_x(10.0 * i);
+  v1::SensorFrame bare;
+  bare.set_jpeg("x");
+  v1::SensorFrame pose_only;
+  pose_only.set_sequence(3);
+  pose_only.mutable_pose()->mutable_orientation()->set_w(1);
+  for (const v1::SensorFrame* frame : std::vector<const v1::SensorFrame*>{full.get(), &bare, &pose_only}) {
+    v1::SensorFrame copy = *frame;
+    copy.clear_jpeg();
+    const std::string expected = copy.SerializeAsString();
+    const std::string bytes = FrameMetaBytes(*frame);
+    EXPECT_EQ(bytes, expected);
+    v1::SensorFrame parsed;
+    ASSERT_TRUE(parsed.ParseFromString(bytes));
+    EXPECT_EQ(parsed.boxes_size(), frame->boxes_size());
+    EXPECT_EQ(parsed.clock_offset_ns(), frame->clock_offset_ns());
+    EXPECT_TRUE(parsed.jpeg().empty());
+  }
+}
+
 TEST(Recorder, BytesExactlyAsReceivedIndexedInServerCaptureOrder) {
   TempRecording rec;
   std::map<std::pair<std::string, uint64_t>, std::string> sent;
