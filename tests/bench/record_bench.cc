@@ -49,6 +49,7 @@ struct Options {
   double seconds = 20;
   int seeks = 100;
   int rounds = 3;
+  bool concurrent = false;
   std::string plot = "record_bench.png";
   std::string dir;  // recording and stores; default a temporary directory
 };
@@ -234,27 +235,58 @@ int Run(const Options& o) {
   std::vector<fs::path> on_dirs;
   for (int r = 0; r < o.rounds; ++r) {
     double round_cpu[2] = {0, 0};
-    for (const bool recording : {r % 2 == 1, r % 2 == 0}) {
-      const std::string tag = std::string(recording ? "on" : "off") + "_" + std::to_string(r + 1);
-      const fs::path phase_dir = dir / tag;
-      const std::string rec_dir = recording ? (phase_dir / "rec").string() : "";
-      auto server = StartServer(phase_dir, rec_dir);
-      if (!server.ok()) return std::cerr << "ave-bench record: " << server.status().message() << "\n", 1;
-      const auto load = RunLoad(*server, o, dir, tag);
-      if (recording) {
-        record_drops += std::max(0.0, Metric(server->metrics_port, "ave_record_drops_total"));
-        full_skips += std::max(0.0, Metric(server->metrics_port, "ave_record_disk_full_skips_total"));
-        frames_in += std::max(0.0, Metric(server->metrics_port, "ave_frames_in_total"));
-        on_dir = phase_dir;
-        rec = phase_dir / "rec";
-        on_dirs.push_back(phase_dir);
+    struct Phase {
+      bool recording = false;
+      std::string tag;
+      fs::path dir;
+      Server server;
+      std::map<std::string, double> load;
+    };
+    auto start = [&](bool recording) -> absl::StatusOr<Phase> {
+      Phase p;
+      p.recording = recording;
+      p.tag = std::string(recording ? "on" : "off") + "_" + std::to_string(r + 1);
+      p.dir = dir / p.tag;
+      auto server = StartServer(p.dir, recording ? (p.dir / "rec").string() : "");
+      if (!server.ok()) return server.status();
+      p.server = *server;
+      return p;
+    };
+    // After the load: the recorder's counters, then the server stops (draining the recorder).
+    auto finish = [&](Phase& p) -> bool {
+      if (p.recording) {
+        record_drops += std::max(0.0, Metric(p.server.metrics_port, "ave_record_drops_total"));
+        full_skips += std::max(0.0, Metric(p.server.metrics_port, "ave_record_disk_full_skips_total"));
+        frames_in += std::max(0.0, Metric(p.server.metrics_port, "ave_frames_in_total"));
+        on_dir = p.dir;
+        rec = p.dir / "rec";
+        on_dirs.push_back(p.dir);
       }
-      StopServer(*server);
-      if (load.empty() || !load.count("server_cpu_pct")) return 1;
-      round_cpu[recording] = load.at("server_cpu_pct");
-      (recording ? fps_on : fps_off) += load.count("fps_sent") ? load.at("fps_sent") / o.rounds : 0;
-      std::cerr << "round " << r + 1 << " " << (recording ? "on " : "off") << ": server CPU " << round_cpu[recording]
+      StopServer(p.server);
+      if (p.load.empty() || !p.load.count("server_cpu_pct")) return false;
+      round_cpu[p.recording] = p.load.at("server_cpu_pct");
+      (p.recording ? fps_on : fps_off) += p.load.count("fps_sent") ? p.load.at("fps_sent") / o.rounds : 0;
+      std::cerr << "round " << r + 1 << " " << (p.recording ? "on " : "off") << ": server CPU " << round_cpu[p.recording]
                 << " % of a core (load average " << LoadAverage() << ")\n";
+      return true;
+    };
+    if (o.concurrent) {
+      // Both servers at once, each under its own ave-loadgen: the same moment's load on both.
+      auto off = start(false), on = start(true);
+      if (!off.ok() || !on.ok()) {
+        return std::cerr << "ave-bench record: " << (off.ok() ? on.status() : off.status()).message() << "\n", 1;
+      }
+      std::thread off_load([&] { off->load = RunLoad(off->server, o, dir, off->tag); });
+      on->load = RunLoad(on->server, o, dir, on->tag);
+      off_load.join();
+      if (!finish(*off) || !finish(*on)) return 1;
+    } else {
+      for (const bool recording : {r % 2 == 1, r % 2 == 0}) {
+        auto p = start(recording);
+        if (!p.ok()) return std::cerr << "ave-bench record: " << p.status().message() << "\n", 1;
+        p->load = RunLoad(p->server, o, dir, p->tag);
+        if (!finish(*p)) return 1;
+      }
     }
     cpu_off.push_back(round_cpu[0]);
     cpu_on.push_back(round_cpu[1]);
@@ -359,12 +391,12 @@ int Run(const Options& o) {
   Plot(o.plot, {{"CPU off", median_off}, {"CPU on", median_on}, {"MB/s", mb_per_s}}, seek_ms);
   char json[900];
   std::snprintf(json, sizeof json,
-                "{\"streams\":%d,\"fps\":%.1f,\"seconds\":%.1f,\"rounds\":%d,\"record_drops\":%.0f,\"cpu_off_pct\":%.1f,"
+                "{\"streams\":%d,\"fps\":%.1f,\"seconds\":%.1f,\"rounds\":%d,\"concurrent\":%d,\"record_drops\":%.0f,\"cpu_off_pct\":%.1f,"
                 "\"cpu_on_pct\":%.1f,\"cpu_overhead_pct\":%.1f,\"cpu_overhead_min_pct\":%.1f,\"cpu_overhead_max_pct\":%.1f,"
                 "\"mb_per_s\":%.2f,\"seek_p50_ms\":%.2f,"
                 "\"seek_p99_ms\":%.2f,\"seek_no_warmup_p99_ms\":%.2f,\"replay_startup_ms\":%.2f,\"index_bytes_per_hour\":%.0f,"
                 "\"frames_indexed\":%lld,\"loadavg_1m\":%.2f}",
-                o.streams, o.fps, o.seconds, o.rounds, drops, median_off, median_on, overhead_pct,
+                o.streams, o.fps, o.seconds, o.rounds, o.concurrent ? 1 : 0, drops, median_off, median_on, overhead_pct,
                 *std::min_element(overheads.begin(), overheads.end()), *std::max_element(overheads.begin(), overheads.end()),
                 mb_per_s, Percentile(seek_ms, 0.5), Percentile(seek_ms, 0.99), Percentile(probe_ms, 0.99),
                 Percentile(startup_ms, 0.5), index_bytes_per_hour, static_cast<long long>(frames_all), LoadAverage());
@@ -380,6 +412,9 @@ Runner AddRecordBench(CLI::App& sub) {
   sub.add_option("--streams", o->streams, "simulated agents")->capture_default_str();
   sub.add_option("--fps", o->fps, "frames per second per stream")->capture_default_str();
   sub.add_option("--seconds", o->seconds, "seconds of load per phase")->capture_default_str();
+  sub.add_flag("--concurrent", o->concurrent,
+               "run each round's off and on servers at once, each under its own ave-loadgen (the same moment's "
+               "machine load on both; twice the load on the machine)");
   sub.add_option("--rounds", o->rounds, "rounds of an off and an on phase, in alternating order")
       ->check(CLI::Range(1, 100))
       ->capture_default_str();
