@@ -162,6 +162,32 @@ std::map<std::string, double> RunLoad(const Server& s, const Options& o, const f
   return json;
 }
 
+// CPU seconds (user + system) of the server's recorder thread: the one named "ave-recorder", or,
+// for a server that does not name it (before issue 18's cost work), the busiest thread that
+// kept the process's name other than the main one. 0 when there is none.
+double RecorderCpuSeconds(pid_t pid) {
+  double named = -1, busiest = 0;
+  std::error_code ec;
+  for (const auto& task : fs::directory_iterator("/proc/" + std::to_string(pid) + "/task", ec)) {
+    std::string comm;
+    std::getline(std::ifstream(task.path() / "comm"), comm);
+    std::string stat;
+    std::getline(std::ifstream(task.path() / "stat"), stat);
+    const size_t paren = stat.rfind(')');
+    if (paren == std::string::npos) continue;
+    std::istringstream fields(stat.substr(paren + 2));
+    std::string f;
+    double ticks = 0;
+    for (int i = 3; i <= 15 && fields >> f; ++i) {
+      if (i == 14 || i == 15) ticks += std::stod(f);  // utime, stime
+    }
+    const double seconds = ticks / static_cast<double>(::sysconf(_SC_CLK_TCK));
+    if (comm == "ave-recorder") named = seconds;
+    else if (comm == "ave-server" && task.path().filename() != std::to_string(pid)) busiest = std::max(busiest, seconds);
+  }
+  return named >= 0 ? named : busiest;
+}
+
 double LoadAverage() {  // the 1-minute load average, as the docs quote it
   double v = -1;
   std::ifstream("/proc/loadavg") >> v;
@@ -231,6 +257,7 @@ int Run(const Options& o) {
   // overhead is the median of the rounds' on/off ratios, so one disturbed round does not decide it.
   std::vector<double> cpu_off, cpu_on, overheads;
   double record_drops = 0, full_skips = 0, frames_in = 0, fps_off = 0, fps_on = 0;
+  double recorder_cpu_s = 0;  // the recorder thread's CPU over every recording phase's load
   fs::path on_dir, rec;
   std::vector<fs::path> on_dirs;
   for (int r = 0; r < o.rounds; ++r) {
@@ -277,14 +304,18 @@ int Run(const Options& o) {
         return std::cerr << "ave-bench record: " << (off.ok() ? on.status() : off.status()).message() << "\n", 1;
       }
       std::thread off_load([&] { off->load = RunLoad(off->server, o, dir, off->tag); });
+      const double recorder_before = RecorderCpuSeconds(on->server.pid);
       on->load = RunLoad(on->server, o, dir, on->tag);
+      recorder_cpu_s += RecorderCpuSeconds(on->server.pid) - recorder_before;
       off_load.join();
       if (!finish(*off) || !finish(*on)) return 1;
     } else {
       for (const bool recording : {r % 2 == 1, r % 2 == 0}) {
         auto p = start(recording);
         if (!p.ok()) return std::cerr << "ave-bench record: " << p.status().message() << "\n", 1;
+        const double recorder_before = RecorderCpuSeconds(p->server.pid);
         p->load = RunLoad(p->server, o, dir, p->tag);
+        if (recording) recorder_cpu_s += RecorderCpuSeconds(p->server.pid) - recorder_before;
         if (!finish(*p)) return 1;
       }
     }
@@ -373,6 +404,9 @@ int Run(const Options& o) {
 
   const double median_off = Percentile(cpu_off, 0.5), median_on = Percentile(cpu_on, 0.5);
   const double overhead_pct = Percentile(overheads, 0.5);
+  // The recorder thread's own CPU while the load ran, in % of a core (its share of the overhead
+  // that this machine's load cannot blur: the other threads' CPU varies more between phases).
+  const double recorder_cpu_pct = 100.0 * recorder_cpu_s / (o.seconds * o.rounds);
   const double drops = record_drops + full_skips;
   std::cout << "recording off: server CPU " << median_off << " % of a core (median of " << o.rounds << " phases), " << fps_off
             << " frames/s sent\n"
@@ -382,6 +416,7 @@ int Run(const Options& o) {
   for (double v : overheads) std::cout << " " << v << " %";
   std::cout << "; median " << overhead_pct << " % server CPU; " << mb_per_s << " MB/s written over " << recorded_s
             << " s (last round); load average " << LoadAverage() << "\n"
+            << "recorder thread: " << recorder_cpu_pct << " % of a core while recording\n"
             << "seek (" << seek_ms.size() << " random times, all cameras): p50 " << Percentile(seek_ms, 0.5) << " ms, p99 "
             << Percentile(seek_ms, 0.99) << " ms; without the warm-up p50 " << Percentile(probe_ms, 0.5) << " ms, p99 "
             << Percentile(probe_ms, 0.99) << " ms; replay start-up (Replay call to first update) p50 "
@@ -395,11 +430,11 @@ int Run(const Options& o) {
                 "\"cpu_on_pct\":%.1f,\"cpu_overhead_pct\":%.1f,\"cpu_overhead_min_pct\":%.1f,\"cpu_overhead_max_pct\":%.1f,"
                 "\"mb_per_s\":%.2f,\"seek_p50_ms\":%.2f,"
                 "\"seek_p99_ms\":%.2f,\"seek_no_warmup_p99_ms\":%.2f,\"replay_startup_ms\":%.2f,\"index_bytes_per_hour\":%.0f,"
-                "\"frames_indexed\":%lld,\"loadavg_1m\":%.2f}",
+                "\"frames_indexed\":%lld,\"recorder_cpu_pct\":%.2f,\"loadavg_1m\":%.2f}",
                 o.streams, o.fps, o.seconds, o.rounds, o.concurrent ? 1 : 0, drops, median_off, median_on, overhead_pct,
                 *std::min_element(overheads.begin(), overheads.end()), *std::max_element(overheads.begin(), overheads.end()),
                 mb_per_s, Percentile(seek_ms, 0.5), Percentile(seek_ms, 0.99), Percentile(probe_ms, 0.99),
-                Percentile(startup_ms, 0.5), index_bytes_per_hour, static_cast<long long>(frames_all), LoadAverage());
+                Percentile(startup_ms, 0.5), index_bytes_per_hour, static_cast<long long>(frames_all), recorder_cpu_pct, LoadAverage());
   std::cout << json << std::endl;
   if (o.dir.empty()) fs::remove_all(dir);
   return 0;
