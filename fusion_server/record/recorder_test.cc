@@ -300,6 +300,56 @@ TEST(Recorder, WriteFailureFromFullDiskStopsAndResumes) {
   EXPECT_EQ(*(*index)->IntegrityCheck(), "ok");
 }
 
+// Frames queued together are written by one pwritev per segment; when it fails part-way (the
+// file size limit cuts it), every frame of the failed write is cut back and counted as skipped,
+// none is indexed, and the segment on disk is exactly as long as its indexed frames.
+TEST(Recorder, BatchedWriteFailingPartWayDropsEachOfItsFrames) {
+  TempRecording rec;
+  RecorderOptions o = Options(rec);
+  const std::string big(400 << 10, 'j');
+  rlimit old_limit{};
+  ASSERT_EQ(getrlimit(RLIMIT_FSIZE, &old_limit), 0);
+  signal(SIGXFSZ, SIG_IGN);
+  auto recorder = Recorder::Open(rec.store_path(), o);
+  ASSERT_TRUE(recorder.ok());
+  auto submit = [&](int k) { (*recorder)->SubmitFrame("cam", TestFrame(k, 0, big), kT0 + k * kFrameNs, kT0 + k * kFrameNs); };
+  submit(1);
+  submit(2);
+  (*recorder)->Drain();
+  rlimit limit = old_limit;
+  limit.rlim_cur = 1000 << 10;  // the next write gets 200 KB in, then EFBIG
+  ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &limit), 0);
+  for (int k = 3; k <= 5; ++k) submit(k);  // usually one batch; split, the later ones are skipped or probe and fail
+  (*recorder)->Drain();
+  RecorderStats stats = (*recorder)->Stats();
+  const int64_t on_disk = SegmentBytesOnDisk(rec.dir());
+  ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &old_limit), 0);
+  EXPECT_TRUE(stats.disk_full);
+  EXPECT_EQ(stats.disk_full_events, 1u);
+  EXPECT_EQ(stats.disk_full_skips, 3u);
+  EXPECT_EQ(stats.frames_recorded, 2u);
+  EXPECT_EQ(on_disk, 2 * static_cast<int64_t>(big.size()));  // the partial write was cut back
+  submit(6);
+  (*recorder)->Drain();
+  stats = (*recorder)->Stats();
+  EXPECT_FALSE(stats.disk_full);
+  EXPECT_EQ(stats.frames_recorded, 3u);
+  auto index = RecordIndex::Open(rec.store_path());
+  auto rows = (*index)->Frames({}, 0, std::numeric_limits<int64_t>::max(), 100);
+  ASSERT_EQ(rows->size(), 3u);
+  EXPECT_EQ(rows->back().sequence, 6u);
+  int64_t indexed = 0;
+  for (const FrameRow& row : *rows) {
+    indexed += row.length;
+    auto bytes = ReadSegmentBytes(rec.dir(), row.segment_path, row.offset, row.length);
+    ASSERT_TRUE(bytes.ok()) << bytes.status();
+    EXPECT_EQ(*bytes, big);
+  }
+  (*recorder).reset();  // closes the segment: its reserved tail is released, the size stays
+  EXPECT_EQ(SegmentBytesOnDisk(rec.dir()), indexed);
+  EXPECT_EQ(*(*index)->IntegrityCheck(), "ok");
+}
+
 TEST(Recorder, RestartTruncatesUnindexedTailsAndRemovesUnindexedSegments) {
   TempRecording rec;
   std::string segment;
