@@ -18,7 +18,20 @@ class Stmt {
   Stmt(sqlite3* db, const std::string& path, const std::string& sql) : db_(db), path_(path) {
     if (sqlite3_prepare_v2(db, sql.c_str(), -1, &s_, nullptr) != SQLITE_OK) status_ = Error("prepare");
   }
-  ~Stmt() { sqlite3_finalize(s_); }
+  // A statement the index keeps prepared (RecordIndex::Cached): reset, not finalized, at the end.
+  Stmt(sqlite3* db, const std::string& path, sqlite3_stmt* cached, const char* sql)
+      : db_(db), path_(path), s_(cached), owned_(false) {
+    if (!s_) status_ = absl::InternalError(absl::StrCat("recording index '", path_, "': prepare \"", sql, "\": ",
+                                                         sqlite3_errmsg(db_)));
+  }
+  ~Stmt() {
+    if (owned_) {
+      sqlite3_finalize(s_);
+    } else if (s_) {
+      sqlite3_reset(s_);
+      sqlite3_clear_bindings(s_);
+    }
+  }
   Stmt(const Stmt&) = delete;
   Stmt& operator=(const Stmt&) = delete;
 
@@ -63,6 +76,7 @@ class Stmt {
   sqlite3* db_;
   const std::string& path_;
   sqlite3_stmt* s_ = nullptr;
+  bool owned_ = true;
   absl::Status status_;
 };
 
@@ -114,7 +128,19 @@ absl::StatusOr<std::unique_ptr<RecordIndex>> RecordIndex::Open(const std::string
   return index;
 }
 
-RecordIndex::~RecordIndex() { sqlite3_close_v2(db_); }
+RecordIndex::~RecordIndex() {
+  for (auto& [sql, stmt] : cached_) sqlite3_finalize(stmt);
+  sqlite3_close_v2(db_);
+}
+
+sqlite3_stmt* RecordIndex::Cached(const char* sql) {
+  auto it = cached_.find(sql);
+  if (it != cached_.end()) return it->second;
+  sqlite3_stmt* stmt = nullptr;
+  if (sqlite3_prepare_v2(db_, sql, -1, &stmt, nullptr) != SQLITE_OK) return nullptr;
+  cached_.emplace(sql, stmt);
+  return stmt;
+}
 
 absl::Status RecordIndex::Error(const std::string& what) const {
   return absl::InternalError(absl::StrCat("recording index '", path_, "': ", what, ": ", sqlite3_errmsg(db_)));
@@ -129,9 +155,12 @@ absl::Status RecordIndex::Commit(IndexBatch& batch) {
   if (absl::Status s = Exec("BEGIN IMMEDIATE"); !s.ok()) return s;
   auto body = [&]() -> absl::Status {
     std::map<std::string, int64_t> ids;
-    Stmt insert_seg(db_, path_,
-                    "INSERT INTO record_segments (sensor_id, path, start_ns, end_ns, bytes, closed) VALUES (?1, ?2, ?3, ?4, ?5, ?6)");
-    Stmt update_seg(db_, path_, "UPDATE record_segments SET end_ns = ?2, bytes = ?3, closed = ?4 WHERE id = ?1");
+    static constexpr char kInsertSegment[] =
+        "INSERT INTO record_segments (sensor_id, path, start_ns, end_ns, bytes, closed) VALUES (?1, ?2, ?3, ?4, ?5, ?6)";
+    Stmt insert_seg(db_, path_, Cached(kInsertSegment), kInsertSegment);
+    static constexpr char kUpdateSegment[] =
+        "UPDATE record_segments SET end_ns = ?2, bytes = ?3, closed = ?4 WHERE id = ?1";
+    Stmt update_seg(db_, path_, Cached(kUpdateSegment), kUpdateSegment);
     for (SegmentRow* seg : batch.segments) {
       if (seg->id == 0) {
         insert_seg.Bind(1, seg->sensor_id);
@@ -151,9 +180,10 @@ absl::Status RecordIndex::Commit(IndexBatch& batch) {
         ids[seg->path] = seg->id;
       }
     }
-    Stmt insert_frame(db_, path_,
-                      "INSERT INTO record_frames (segment_id, sensor_id, sequence, capture_server_ns, received_ns, offset, "
-                      "length, meta) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)");
+    static constexpr char kInsertFrame[] =
+        "INSERT INTO record_frames (segment_id, sensor_id, sequence, capture_server_ns, received_ns, offset, "
+        "length, meta) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8)";
+    Stmt insert_frame(db_, path_, Cached(kInsertFrame), kInsertFrame);
     for (const FrameRow& f : batch.frames) {
       int64_t segment_id = f.segment_id;
       if (segment_id == 0) {
@@ -171,8 +201,9 @@ absl::Status RecordIndex::Commit(IndexBatch& batch) {
       insert_frame.BindBlob(8, f.meta);
       if (absl::Status s = insert_frame.Run(); !s.ok()) return s;
     }
-    Stmt insert_sweep(db_, path_,
-                      "INSERT INTO record_sweeps (sensor_id, sequence, capture_server_ns, received_ns, meta) VALUES (?1, ?2, ?3, ?4, ?5)");
+    static constexpr char kInsertSweep[] =
+        "INSERT INTO record_sweeps (sensor_id, sequence, capture_server_ns, received_ns, meta) VALUES (?1, ?2, ?3, ?4, ?5)";
+    Stmt insert_sweep(db_, path_, Cached(kInsertSweep), kInsertSweep);
     for (const SweepRow& w : batch.sweeps) {
       insert_sweep.Bind(1, w.sensor_id);
       insert_sweep.Bind(2, static_cast<int64_t>(w.sequence));
@@ -181,15 +212,18 @@ absl::Status RecordIndex::Commit(IndexBatch& batch) {
       insert_sweep.BindBlob(5, w.meta);
       if (absl::Status s = insert_sweep.Run(); !s.ok()) return s;
     }
-    Stmt insert_objects(db_, path_, "INSERT INTO record_objects (t_ns, objects) VALUES (?1, ?2)");
+    static constexpr char kInsertObjects[] =
+        "INSERT INTO record_objects (t_ns, objects) VALUES (?1, ?2)";
+    Stmt insert_objects(db_, path_, Cached(kInsertObjects), kInsertObjects);
     for (const ObjectsRow& o : batch.objects) {
       insert_objects.Bind(1, o.t_ns);
       insert_objects.BindBlob(2, o.objects);
       if (absl::Status s = insert_objects.Run(); !s.ok()) return s;
     }
-    Stmt upsert_sensor(db_, path_,
-                       "INSERT INTO record_sensors (sensor_id, camera, updated_ns) VALUES (?1, ?2, strftime('%s','now') * 1000000000) "
-                       "ON CONFLICT(sensor_id) DO UPDATE SET camera = excluded.camera, updated_ns = excluded.updated_ns");
+    static constexpr char kUpsertSensor[] =
+        "INSERT INTO record_sensors (sensor_id, camera, updated_ns) VALUES (?1, ?2, strftime('%s','now') * 1000000000) "
+        "ON CONFLICT(sensor_id) DO UPDATE SET camera = excluded.camera, updated_ns = excluded.updated_ns";
+    Stmt upsert_sensor(db_, path_, Cached(kUpsertSensor), kUpsertSensor);
     for (const auto& [id, camera] : batch.sensors) {
       upsert_sensor.Bind(1, id);
       upsert_sensor.BindBlob(2, camera);

@@ -6,6 +6,7 @@
 //
 // Times are server-clock nanoseconds (system_clock since the Unix epoch).
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -15,6 +16,7 @@
 #include "absl/status/statusor.h"
 
 struct sqlite3;
+struct sqlite3_stmt;
 
 namespace ave::record {
 
@@ -110,8 +112,11 @@ class RecordIndex {
   RecordIndex(sqlite3* db, std::string path) : db_(db), path_(std::move(path)) {}
   absl::Status Exec(const char* sql);
   absl::Status Error(const std::string& what) const;
+  // The commit's statements, prepared once (not per commit); nullptr when preparing fails.
+  sqlite3_stmt* Cached(const char* sql);
   sqlite3* db_;
   std::string path_;
+  std::map<std::string, sqlite3_stmt*> cached_;
 };
 
 }  // namespace ave::record

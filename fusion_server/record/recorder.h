@@ -20,6 +20,7 @@
 // recording stops cleanly (one log line, ave_record_disk_full 1), frames are counted as skipped,
 // live serving goes on; every flush period the writer runs retention and tries again, and
 // recording resumes (one log line) as soon as a write fits.
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -109,14 +110,37 @@ class Recorder {
   struct OpenSegment {
     SegmentRow row;
     int fd = -1;
-    int64_t written = 0;  // bytes in the file (row.bytes: committed)
+    int64_t written = 0;  // bytes in the file or pending for it (row.bytes: committed)
     bool dirty = false;
+    // Frames placed in this segment (offsets from pending_from) but not yet written: one pwritev
+    // per segment per flush instead of one pwrite per frame. `hold` keeps their JPEGs alive.
+    int64_t pending_from = 0;
+    int64_t pending_bytes = 0;
+    // Bytes reserved by fallocate (FALLOC_FL_KEEP_SIZE: the file's size stays what is written), a
+    // few MB at a time, so that ext4 allocates blocks once per reservation, not at every flush's
+    // writeback. What is left over is released when the segment's descriptor closes (CloseFd) or,
+    // after a crash, by Open's repair.
+    int64_t allocated = 0;
+    std::vector<std::shared_ptr<const v1::SensorFrame>> hold;
   };
   Recorder(RecorderOptions options, std::unique_ptr<RecordIndex> index);
   absl::Status Repair();
   void Loop();
   void WriteItem(Item& item);
   void FlushBatch();
+  // Writes a segment's pending frames (WriteItem places them); on failure truncates back and drops
+  // their rows from the batch (counted as skipped for a full disk, else as write errors).
+  void WritePending(OpenSegment& seg);
+  void CloseFd(OpenSegment& seg);  // releases the unused reservation, then closes
+  // mu_ held: the queue holds enough to wake the writer before its flush time.
+  bool WakeDue() const {
+    return queue_bytes_ >= std::min<int64_t>(kWakeBytes, options_.queue_max_bytes / 4) ||
+           queue_.size() >= std::max<size_t>(1, options_.queue_max_items / 4);
+  }
+  static constexpr int64_t kWakeBytes = 4 << 20;
+  static constexpr int64_t kPendingMaxBytes = 1 << 20;  // per segment, then written at once
+  static constexpr size_t kMaxIov = 256;
+  static constexpr int64_t kReserveBytes = 4 << 20;  // fallocate step
   // Deletes segments past max_age, then the oldest closed ones while the recording plus
   // `need_bytes` exceeds max_bytes.
   void RunRetention(int64_t need_bytes = 0);
@@ -146,6 +170,7 @@ class Recorder {
   IndexBatch batch_;
   std::vector<SegmentRow> closed_pending_;  // closed since the last commit (their final rows)
   int64_t last_objects_ns_ = 0;
+  bool reserve_ = true;  // false once fallocate says the filesystem cannot
   bool probe_ = false;  // while full: the next frame may try to write (set once per flush)
   int64_t last_retention_ns_ = 0;
 
@@ -156,6 +181,11 @@ class Recorder {
   std::atomic<bool> disk_full_{false};
   std::thread thread_;
 };
+
+// What the index keeps of a frame (FrameRow.meta): the serialized ave.v1.SensorFrame without its
+// JPEG (capture time, sequence, pose, boxes, clock offset). Written field by field from the
+// received message, the same bytes as serializing a copy of those fields, without the copy.
+std::string FrameMetaBytes(const v1::SensorFrame& frame);
 
 // The server's wall clock (system_clock) in ns: the clock recorded times are on.
 int64_t WallNowNs();

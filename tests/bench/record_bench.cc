@@ -1,10 +1,11 @@
 // ave-bench record (issue 18): what recording costs and how fast a replay finds its place.
 //
-// One run, two phases against real ave-server processes on loopback, the load from ave-loadgen
-// (deploy/loadtest: N agents streaming pre-encoded 640x480 JPEGs at --fps, one viewer): first with
-// recording off, then with --record-dir, the same load. Reported side by side: server CPU (from
-// /proc, by ave-loadgen), the overhead recording adds, MB/s written, recorder drops (queue full,
-// disk full), then over the recording made: seek latency (ReplaySession::Open at random times:
+// --rounds rounds of two phases against real ave-server processes on loopback, the load from
+// ave-loadgen (deploy/loadtest: N agents streaming pre-encoded 640x480 JPEGs at --fps, one viewer):
+// recording off, and with --record-dir under the same load, in alternating order round by round.
+// Reported side by side: server CPU (from /proc, by ave-loadgen), the overhead recording adds (the
+// median of the rounds' on/off ratios), MB/s written, recorder drops (queue full, disk full), then
+// over the last recording made: seek latency (ReplaySession::Open at random times:
 // the index probes, the warm-up and the JPEG reads), replay start-up (Replay call to first update
 // through a restarted server), index bytes per recorded hour (SQLite dbstat of the record_
 // tables). A PNG of the figures; last line on stdout a JSON summary.
@@ -47,6 +48,8 @@ struct Options {
   double fps = 15;
   double seconds = 20;
   int seeks = 100;
+  int rounds = 3;
+  bool concurrent = false;
   std::string plot = "record_bench.png";
   std::string dir;  // recording and stores; default a temporary directory
 };
@@ -159,6 +162,38 @@ std::map<std::string, double> RunLoad(const Server& s, const Options& o, const f
   return json;
 }
 
+// CPU seconds (user + system) of the server's recorder thread: the one named "ave-recorder", or,
+// for a server that does not name it (before issue 18's cost work), the busiest thread that
+// kept the process's name other than the main one. 0 when there is none.
+double RecorderCpuSeconds(pid_t pid) {
+  double named = -1, busiest = 0;
+  std::error_code ec;
+  for (const auto& task : fs::directory_iterator("/proc/" + std::to_string(pid) + "/task", ec)) {
+    std::string comm;
+    std::getline(std::ifstream(task.path() / "comm"), comm);
+    std::string stat;
+    std::getline(std::ifstream(task.path() / "stat"), stat);
+    const size_t paren = stat.rfind(')');
+    if (paren == std::string::npos) continue;
+    std::istringstream fields(stat.substr(paren + 2));
+    std::string f;
+    double ticks = 0;
+    for (int i = 3; i <= 15 && fields >> f; ++i) {
+      if (i == 14 || i == 15) ticks += std::stod(f);  // utime, stime
+    }
+    const double seconds = ticks / static_cast<double>(::sysconf(_SC_CLK_TCK));
+    if (comm == "ave-recorder") named = seconds;
+    else if (comm == "ave-server" && task.path().filename() != std::to_string(pid)) busiest = std::max(busiest, seconds);
+  }
+  return named >= 0 ? named : busiest;
+}
+
+double LoadAverage() {  // the 1-minute load average, as the docs quote it
+  double v = -1;
+  std::ifstream("/proc/loadavg") >> v;
+  return v;
+}
+
 double Percentile(std::vector<double> v, double q) {
   if (v.empty()) return 0;
   std::sort(v.begin(), v.end());
@@ -214,23 +249,91 @@ void Plot(const std::string& path, const std::vector<std::pair<std::string, doub
 int Run(const Options& o) {
   const fs::path dir = o.dir.empty() ? fs::temp_directory_path() / ("ave_record_bench_" + std::to_string(::getpid())) : fs::path(o.dir);
   fs::remove_all(dir);
-  const fs::path off_dir = dir / "off", on_dir = dir / "on", rec = dir / "on" / "rec";
 
-  // Phase 1: recording off.
-  auto off = StartServer(off_dir, "");
-  if (!off.ok()) return std::cerr << "ave-bench record: " << off.status().message() << "\n", 1;
-  const auto load_off = RunLoad(*off, o, dir, "off");
-  StopServer(*off);
-  // Phase 2: the same load, recording.
-  auto on = StartServer(on_dir, rec.string());
-  if (!on.ok()) return std::cerr << "ave-bench record: " << on.status().message() << "\n", 1;
-  const auto load_on = RunLoad(*on, o, dir, "on");
-  const double record_drops = Metric(on->metrics_port, "ave_record_drops_total");
-  const double full_skips = Metric(on->metrics_port, "ave_record_disk_full_skips_total");
-  const double frames_in = Metric(on->metrics_port, "ave_frames_in_total");
-  StopServer(*on);
-  if (load_off.empty() || load_on.empty()) return 1;
+  // Rounds of two phases each, recording off and on, in alternating order (off-on, on-off, ...):
+  // this machine's load drifts over minutes, and one off phase then one on phase 20 s later
+  // measured the drift as much as the recording (+2 % to +27 % in three runs). Each phase runs a
+  // fresh server (its own store; recording into its own directory) under the same load; the
+  // overhead is the median of the rounds' on/off ratios, so one disturbed round does not decide it.
+  std::vector<double> cpu_off, cpu_on, overheads;
+  double record_drops = 0, full_skips = 0, frames_in = 0, fps_off = 0, fps_on = 0;
+  double recorder_cpu_s = 0;  // the recorder thread's CPU over every recording phase's load
+  fs::path on_dir, rec;
+  std::vector<fs::path> on_dirs;
+  for (int r = 0; r < o.rounds; ++r) {
+    double round_cpu[2] = {0, 0};
+    struct Phase {
+      bool recording = false;
+      std::string tag;
+      fs::path dir;
+      Server server;
+      std::map<std::string, double> load;
+    };
+    auto start = [&](bool recording) -> absl::StatusOr<Phase> {
+      Phase p;
+      p.recording = recording;
+      p.tag = std::string(recording ? "on" : "off") + "_" + std::to_string(r + 1);
+      p.dir = dir / p.tag;
+      auto server = StartServer(p.dir, recording ? (p.dir / "rec").string() : "");
+      if (!server.ok()) return server.status();
+      p.server = *server;
+      return p;
+    };
+    // After the load: the recorder's counters, then the server stops (draining the recorder).
+    auto finish = [&](Phase& p) -> bool {
+      if (p.recording) {
+        record_drops += std::max(0.0, Metric(p.server.metrics_port, "ave_record_drops_total"));
+        full_skips += std::max(0.0, Metric(p.server.metrics_port, "ave_record_disk_full_skips_total"));
+        frames_in += std::max(0.0, Metric(p.server.metrics_port, "ave_frames_in_total"));
+        on_dir = p.dir;
+        rec = p.dir / "rec";
+        on_dirs.push_back(p.dir);
+      }
+      StopServer(p.server);
+      if (p.load.empty() || !p.load.count("server_cpu_pct")) return false;
+      round_cpu[p.recording] = p.load.at("server_cpu_pct");
+      (p.recording ? fps_on : fps_off) += p.load.count("fps_sent") ? p.load.at("fps_sent") / o.rounds : 0;
+      std::cerr << "round " << r + 1 << " " << (p.recording ? "on " : "off") << ": server CPU " << round_cpu[p.recording]
+                << " % of a core (load average " << LoadAverage() << ")\n";
+      return true;
+    };
+    if (o.concurrent) {
+      // Both servers at once, each under its own ave-loadgen: the same moment's load on both.
+      auto off = start(false), on = start(true);
+      if (!off.ok() || !on.ok()) {
+        return std::cerr << "ave-bench record: " << (off.ok() ? on.status() : off.status()).message() << "\n", 1;
+      }
+      std::thread off_load([&] { off->load = RunLoad(off->server, o, dir, off->tag); });
+      const double recorder_before = RecorderCpuSeconds(on->server.pid);
+      on->load = RunLoad(on->server, o, dir, on->tag);
+      recorder_cpu_s += RecorderCpuSeconds(on->server.pid) - recorder_before;
+      off_load.join();
+      if (!finish(*off) || !finish(*on)) return 1;
+    } else {
+      for (const bool recording : {r % 2 == 1, r % 2 == 0}) {
+        auto p = start(recording);
+        if (!p.ok()) return std::cerr << "ave-bench record: " << p.status().message() << "\n", 1;
+        const double recorder_before = RecorderCpuSeconds(p->server.pid);
+        p->load = RunLoad(p->server, o, dir, p->tag);
+        if (recording) recorder_cpu_s += RecorderCpuSeconds(p->server.pid) - recorder_before;
+        if (!finish(*p)) return 1;
+      }
+    }
+    cpu_off.push_back(round_cpu[0]);
+    cpu_on.push_back(round_cpu[1]);
+    overheads.push_back(round_cpu[0] > 0 ? 100.0 * (round_cpu[1] - round_cpu[0]) / round_cpu[0] : 0);
+  }
+  // Frames indexed, over every recording phase.
+  int64_t frames_all = 0;
+  for (const fs::path& d : on_dirs) {
+    auto index = record::RecordIndex::Open((d / "ave.db").string());
+    if (!index.ok()) return std::cerr << "ave-bench record: " << index.status().message() << "\n", 1;
+    auto spans = (*index)->Spans();
+    if (!spans.ok()) return std::cerr << "ave-bench record: " << spans.status().message() << "\n", 1;
+    for (const auto& span : *spans) frames_all += span.frames;
+  }
 
+  // Seeks, replay start-up and index size: over the last recording phase.
   const std::string store = (on_dir / "ave.db").string();
   auto index = record::RecordIndex::Open(store);
   if (!index.ok()) return std::cerr << "ave-bench record: " << index.status().message() << "\n", 1;
@@ -299,29 +402,39 @@ int Run(const Options& o) {
   }
   StopServer(*again);
 
-  const double cpu_off = load_off.count("server_cpu_pct") ? load_off.at("server_cpu_pct") : 0;
-  const double cpu_on = load_on.count("server_cpu_pct") ? load_on.at("server_cpu_pct") : 0;
-  const double overhead_pct = cpu_off > 0 ? 100.0 * (cpu_on - cpu_off) / cpu_off : 0;
-  const double drops = std::max(0.0, record_drops) + std::max(0.0, full_skips);
-  std::cout << "recording off: server CPU " << cpu_off << " % of a core, " << load_off.at("fps_sent") << " frames/s sent\n"
-            << "recording on:  server CPU " << cpu_on << " % of a core, " << load_on.at("fps_sent") << " frames/s sent, "
-            << frames << " of " << frames_in << " accepted frames indexed, " << drops << " recorder drops\n"
-            << "overhead " << overhead_pct << " % server CPU; " << mb_per_s << " MB/s written over " << recorded_s << " s\n"
+  const double median_off = Percentile(cpu_off, 0.5), median_on = Percentile(cpu_on, 0.5);
+  const double overhead_pct = Percentile(overheads, 0.5);
+  // The recorder thread's own CPU while the load ran, in % of a core (its share of the overhead
+  // that this machine's load cannot blur: the other threads' CPU varies more between phases).
+  const double recorder_cpu_pct = 100.0 * recorder_cpu_s / (o.seconds * o.rounds);
+  const double drops = record_drops + full_skips;
+  std::cout << "recording off: server CPU " << median_off << " % of a core (median of " << o.rounds << " phases), " << fps_off
+            << " frames/s sent\n"
+            << "recording on:  server CPU " << median_on << " % of a core (median), " << fps_on << " frames/s sent, "
+            << frames_all << " of " << frames_in << " accepted frames indexed, " << drops << " recorder drops\n"
+            << "overhead per round (on vs off of the same round):";
+  for (double v : overheads) std::cout << " " << v << " %";
+  std::cout << "; median " << overhead_pct << " % server CPU; " << mb_per_s << " MB/s written over " << recorded_s
+            << " s (last round); load average " << LoadAverage() << "\n"
+            << "recorder thread: " << recorder_cpu_pct << " % of a core while recording\n"
             << "seek (" << seek_ms.size() << " random times, all cameras): p50 " << Percentile(seek_ms, 0.5) << " ms, p99 "
             << Percentile(seek_ms, 0.99) << " ms; without the warm-up p50 " << Percentile(probe_ms, 0.5) << " ms, p99 "
             << Percentile(probe_ms, 0.99) << " ms; replay start-up (Replay call to first update) p50 "
             << Percentile(startup_ms, 0.5) << " ms\n"
             << "index: " << index_bytes << " bytes for " << recorded_s << " s = " << index_bytes_per_hour / 1e6
             << " MB per recorded hour (" << (frames ? index_bytes / frames : 0) << " bytes per frame)\n";
-  Plot(o.plot, {{"CPU off", cpu_off}, {"CPU on", cpu_on}, {"MB/s", mb_per_s}}, seek_ms);
-  char json[640];
+  Plot(o.plot, {{"CPU off", median_off}, {"CPU on", median_on}, {"MB/s", mb_per_s}}, seek_ms);
+  char json[900];
   std::snprintf(json, sizeof json,
-                "{\"streams\":%d,\"fps\":%.1f,\"seconds\":%.1f,\"record_drops\":%.0f,\"cpu_off_pct\":%.1f,"
-                "\"cpu_on_pct\":%.1f,\"cpu_overhead_pct\":%.1f,\"mb_per_s\":%.2f,\"seek_p50_ms\":%.2f,"
-                "\"seek_p99_ms\":%.2f,\"seek_no_warmup_p99_ms\":%.2f,\"replay_startup_ms\":%.2f,\"index_bytes_per_hour\":%.0f,\"frames_indexed\":%lld}",
-                o.streams, o.fps, o.seconds, drops, cpu_off, cpu_on, overhead_pct, mb_per_s, Percentile(seek_ms, 0.5),
-                Percentile(seek_ms, 0.99), Percentile(probe_ms, 0.99), Percentile(startup_ms, 0.5), index_bytes_per_hour,
-                static_cast<long long>(frames));
+                "{\"streams\":%d,\"fps\":%.1f,\"seconds\":%.1f,\"rounds\":%d,\"concurrent\":%d,\"record_drops\":%.0f,\"cpu_off_pct\":%.1f,"
+                "\"cpu_on_pct\":%.1f,\"cpu_overhead_pct\":%.1f,\"cpu_overhead_min_pct\":%.1f,\"cpu_overhead_max_pct\":%.1f,"
+                "\"mb_per_s\":%.2f,\"seek_p50_ms\":%.2f,"
+                "\"seek_p99_ms\":%.2f,\"seek_no_warmup_p99_ms\":%.2f,\"replay_startup_ms\":%.2f,\"index_bytes_per_hour\":%.0f,"
+                "\"frames_indexed\":%lld,\"recorder_cpu_pct\":%.2f,\"loadavg_1m\":%.2f}",
+                o.streams, o.fps, o.seconds, o.rounds, o.concurrent ? 1 : 0, drops, median_off, median_on, overhead_pct,
+                *std::min_element(overheads.begin(), overheads.end()), *std::max_element(overheads.begin(), overheads.end()),
+                mb_per_s, Percentile(seek_ms, 0.5), Percentile(seek_ms, 0.99), Percentile(probe_ms, 0.99),
+                Percentile(startup_ms, 0.5), index_bytes_per_hour, static_cast<long long>(frames_all), recorder_cpu_pct, LoadAverage());
   std::cout << json << std::endl;
   if (o.dir.empty()) fs::remove_all(dir);
   return 0;
@@ -333,7 +446,13 @@ Runner AddRecordBench(CLI::App& sub) {
   auto o = std::make_shared<Options>();
   sub.add_option("--streams", o->streams, "simulated agents")->capture_default_str();
   sub.add_option("--fps", o->fps, "frames per second per stream")->capture_default_str();
-  sub.add_option("--seconds", o->seconds, "seconds of load per phase (off, then on)")->capture_default_str();
+  sub.add_option("--seconds", o->seconds, "seconds of load per phase")->capture_default_str();
+  sub.add_flag("--concurrent", o->concurrent,
+               "run each round's off and on servers at once, each under its own ave-loadgen (the same moment's "
+               "machine load on both; twice the load on the machine)");
+  sub.add_option("--rounds", o->rounds, "rounds of an off and an on phase, in alternating order")
+      ->check(CLI::Range(1, 100))
+      ->capture_default_str();
   sub.add_option("--seeks", o->seeks, "random seeks timed")->capture_default_str();
   sub.add_option("--plot", o->plot, "PNG of the figures")->capture_default_str();
   sub.add_option("--dir", o->dir, "keep the stores and recording here (default: a temporary directory, removed)");
