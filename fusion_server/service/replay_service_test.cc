@@ -215,7 +215,9 @@ TEST_F(ReplayServiceTest, RemovedCameraStillReplaysAndADeletedSegmentIsAGap) {
   auto segments = (*index)->Segments();
   ASSERT_TRUE(segments.ok());
   for (const record::SegmentRow& seg : *segments) {
-    if (seg.sensor_id == "cam1") ASSERT_TRUE(fs::remove(server_.dir() / "rec" / seg.path));  // by hand
+    if (seg.sensor_id == "cam1") {
+      ASSERT_TRUE(fs::remove(server_.dir() / "rec" / seg.path));  // by hand
+    }
   }
   v1::ReplayRequest request = Request(base_ns_, base_ns_ + 2 * kFrames * kFrameNs);
   request.set_max_updates(1000);
@@ -227,7 +229,9 @@ TEST_F(ReplayServiceTest, RemovedCameraStillReplaysAndADeletedSegmentIsAGap) {
     for (const v1::CameraState& cam : update.cameras()) {
       if (cam.jpeg().empty()) continue;
       (cam.camera_id() == "cam2" ? cam2_jpegs : cam1_jpegs)++;
-      if (cam.camera_id() == "cam2") EXPECT_EQ(cam.name(), "Test cam2");
+      if (cam.camera_id() == "cam2") {
+        EXPECT_EQ(cam.name(), "Test cam2");
+      }
     }
     for (const v1::ReplayGap& gap : update.replay().gaps()) gaps.push_back(gap);
   }
