@@ -11,7 +11,8 @@
 # from the time line to a moment at least 18 s before the drag and then showed recorded time from
 # it; the server audited that Replay request by the viewer's token with the same start; "live" (the
 # button, not the replay running out) took the viewer back to live; the replay snapshot's time line
-# has the yellow replay playhead and no red live one, the live snapshot the red one at the right end.
+# has the yellow replay playhead and no red live one, the live snapshot the red one at the right end;
+# the replay snapshot (the recording's first moment) shows at most a quarter of live's object paths.
 set -euo pipefail
 root=$1
 build=$2
@@ -189,5 +190,16 @@ assert r_yellow >= h // 2, 'the replay snapshot has no replay playhead on the ti
 assert r_red < h // 2, 'the replay snapshot still has the live playhead'
 assert l_yellow < h // 2, 'the live snapshot still has the replay playhead'
 assert l_red_right >= h // 2, 'the live snapshot has no live playhead at the right end'
+
+# The past looks different: the replay shows the recording's first moment, when the trackers had
+# no paths yet; live, the demo's people and cars trail orange paths across the views.
+def path_pixels(img):
+    w, h, bpp, rows = img
+    return sum(1 for y in range(0, h, 2) for x in range(0, w, 2)
+               if abs(rows[y][x * bpp] - 255) <= 30 and abs(rows[y][x * bpp + 1] - 120) <= 40 and rows[y][x * bpp + 2] <= 80)
+r_paths, l_paths = path_pixels(replay), path_pixels(live_img)
+print(f'object path pixels (every 2nd row and column): replay snapshot {r_paths}, live snapshot {l_paths}')
+assert l_paths >= 50, 'the live snapshot shows no object paths'
+assert r_paths * 4 <= l_paths, 'the replay snapshot shows as many object paths as live: not the recording\'s start'
 PY
 echo "window replay: ok"
