@@ -21,6 +21,7 @@ Window controls (browse view, top left):
   left click    on a camera's marker in any view: select it (highlighted in every view)
   1-9 / 0       select camera N of the list / clear the selection
   f  frustums   k  paths   l  labels   t  age tint   h  panel
+  r             the panel with its Replay section open (drag on its time line to go back)
   p             write --snapshot now;  Esc: quit
 The panel (top left) lists the cameras with status (live / stale / lost) and a time line of
 frames received; its 1 2 3 buttons lock a camera to the top-right, bottom-left, bottom-right view.

@@ -379,6 +379,8 @@ void ReplaySection(OverlayState& state) {
   if (ImGui::Button("pause")) state.replay_command = Command::kPause;
   ImGui::SameLine();
   if (ImGui::Button("live")) state.replay_command = Command::kLive;
+  const ImVec2 live_min = ImGui::GetItemRectMin(), live_size = ImGui::GetItemRectSize();
+  state.live_button_rect_px = {live_min.x, live_min.y, live_size.x, live_size.y};
   ImGui::SameLine();
   ImGui::TextUnformatted(state.replay_status.c_str());
   // Rate presets: a button sets the rate exactly (a typed value never has to be parsed).

@@ -1,6 +1,7 @@
 #include "viewer_client/client/viewer_app.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -327,10 +328,19 @@ class Session {
     SceneClient& first = *clients_[0];
     const int64_t now_ns = NowNs();
     state_.timeline_now_ns = now_ns;
-    if (replaying_ && first.replay_time_ns() > 0) state_.replay_time_ns = first.replay_time_ns();
+    if (replaying_ && first.replay_time_ns() > 0) {
+      state_.replay_time_ns = first.replay_time_ns();
+      // The log says when a panel replay shows its first recorded moment (and how far back it is).
+      if (std::exchange(replay_first_logged_, true) == false && panel_replay_) {
+        AVE_LOG(INFO) << "viewer: replaying recorded time " << state_.replay_time_ns << " ns ("
+                      << absl::StrFormat("%.1f", (now_ns - state_.replay_time_ns) * 1e-9) << " s before now)";
+      }
+    }
+    const char* why = "live button";
     if (command == Command::kNone && replaying_ && !paused_ && panel_replay_ && first.replay_ended() &&
         first.last_error().empty()) {
       command = Command::kLive;  // a panel replay runs to the time it was asked at: it caught up
+      why = "replay caught up";
     }
     if (command == Command::kNone) {
       if (replaying_ && !paused_) {
@@ -372,6 +382,29 @@ class Session {
     state_.replay_time_ns = replaying_ ? seek.from_ns : 0;
     for (auto& c : clients_) c->Start(o);
     state_.replay_status = replaying_ ? "seeking" : "live";
+    replay_first_logged_ = false;
+    if (replaying_) {
+      AVE_LOG(INFO) << "viewer: replay from " << seek.from_ns << " ns ("
+                    << absl::StrFormat("%.1f", (now_ns - seek.from_ns) * 1e-9) << " s before now) to " << seek.to_ns
+                    << " ns at " << state_.replay_rate << "x ("
+                    << (command == Command::kSeek ? "time line" : command == Command::kPlay ? "play" : "rate") << ")";
+    } else {
+      AVE_LOG(INFO) << "viewer: live (" << (command == Command::kSeek ? "time line at now" : why) << ")";
+    }
+  }
+
+  // Where the Replay section's time line and "live" button are in the window, logged when they
+  // appear or move (whole pixels): what an operator's pointer (or a script driving it) aims at.
+  void LogReplayLayout() {
+    std::array<int, 8> px{};
+    for (int i = 0; i < 4; ++i) {
+      px[i] = static_cast<int>(std::lround(state_.timeline_rect_px[i]));
+      px[4 + i] = static_cast<int>(std::lround(state_.live_button_rect_px[i]));
+    }
+    if (px == logged_replay_px_ || px[2] <= 0) return;
+    logged_replay_px_ = px;
+    AVE_LOG(INFO) << absl::StrFormat("viewer: replay time line at x %d y %d w %d h %d px; live button at x %d y %d w %d h %d px",
+                                     px[0], px[1], px[2], px[3], px[4], px[5], px[6], px[7]);
   }
 
   // The time line's spans, asked of the first server every 2 s off the render thread; a server
@@ -381,6 +414,16 @@ class Session {
       if (spans_future_.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return;
       absl::StatusOr<RecordedSpans> spans = spans_future_.get();
       if (spans.ok()) {
+        if (spans->cameras.size() != state_.recorded.cameras.size()) {
+          int64_t earliest_ns = 0;
+          for (const RecordedCameraSpans& c : spans->cameras) {
+            if (!c.intervals_ns.empty() && (earliest_ns == 0 || c.intervals_ns.front().first < earliest_ns)) {
+              earliest_ns = c.intervals_ns.front().first;
+            }
+          }
+          AVE_LOG(INFO) << "viewer: the server records " << spans->cameras.size() << " cameras, from " << earliest_ns
+                        << " ns";
+        }
         state_.recorded = *std::move(spans);
       } else if (spans.status().code() == absl::StatusCode::kFailedPrecondition) {
         spans_off_ = true;
@@ -458,6 +501,7 @@ class Session {
       }
       context_.BindFramebuffer();
       overlay_->EndFrame(saved || ViewsMoved(views));
+      LogReplayLayout();
     }
     last_views_ = views;
     UpdateSelection(views);
@@ -496,6 +540,7 @@ class Session {
       if (c == 'f') state_.frustums = !state_.frustums;
       if (c == 'l') state_.annotations = !state_.annotations;
       if (c == 'h') state_.panel = !state_.panel;
+      if (c == 'r') state_.panel = state_.open_replay = true;  // the panel, its Replay section open
       if (c == 't') state_.display.tint_by_age = !state_.display.tint_by_age;
       if (c == 'k') state_.paths = !state_.paths;
       if (c == 'n') state_.lidar_points = !state_.lidar_points;
@@ -606,6 +651,8 @@ class Session {
   SubscribeOptions subscribe_;  // the start-up subscription (live, or the --replay-* one)
   bool replaying_ = false, paused_ = false;  // the panel's replay (issue 18)
   bool panel_replay_ = false;  // started from the panel (to the time asked): live once it ends
+  bool replay_first_logged_ = false;  // its first recorded moment shown was logged
+  std::array<int, 8> logged_replay_px_{};  // the time line and live button rectangles last logged
   bool auto_locked_ = false;
   std::optional<DisplayOptions> applied_display_;
   std::vector<std::unique_ptr<SceneClient>> clients_;

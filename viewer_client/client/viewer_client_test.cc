@@ -205,6 +205,21 @@ TEST(Overlay, DragOnTheTimeLineSeeksToTheTimeUnderTheCursor) {
   ASSERT_EQ(state.replay_command, OverlayState::ReplayCommand::kSeek);
   const double pixel_ns = 60e9 / w;
   EXPECT_NEAR(static_cast<double>(state.replay_seek_ns), 85e9, 1.5 * pixel_ns);
+  // The "live" button is where the panel says it is (what the window test clicks): a click there
+  // goes back to live.
+  state.replay_command = OverlayState::ReplayCommand::kNone;
+  const auto [lx, ly, lw, lh] = state.live_button_rect_px;
+  ASSERT_GT(lw, 10.f);
+  ASSERT_GT(ly, y + h) << "the live button is below the time line";
+  WindowInput click;
+  click.cursor_px = Eigen::Vector2d(lx + lw / 2, ly + lh / 2);
+  click.left_down = true;
+  click.left_presses = 1;
+  frame(&click);
+  click.left_down = false;
+  click.left_presses = 0;
+  frame(&click);
+  EXPECT_EQ(state.replay_command, OverlayState::ReplayCommand::kLive);
 }
 
 // Issue 7 performance: the overlay is redrawn into its cache only when its triangles changed, and
