@@ -71,41 +71,10 @@ grep -q "drive: done" "$out/drive.log" 2>/dev/null || { cat "$out/drive.log" 2>/
 test -s "$out/first.png" || { echo "FAIL: 'p' wrote no snapshot"; exit 1; }
 test -s "$out/window/quad.png" || { echo "FAIL: closing the window wrote no snapshot"; exit 1; }
 
-python3 - "$out/first.png" "$out/window/quad.png" <<'PY'
-import sys, zlib, struct
-
-def read_png(path):
-    # 8-bit RGB or RGBA, non-interlaced (what the viewer writes); no third-party modules needed.
-    data = open(path, 'rb').read()
-    assert data[:8] == b'\x89PNG\r\n\x1a\n', f'{path}: not a PNG'
-    pos, idat, w = 8, b'', 0
-    while pos < len(data):
-        n, kind = struct.unpack('>I4s', data[pos:pos + 8])
-        body = data[pos + 8:pos + 8 + n]
-        if kind == b'IHDR':
-            w, h, depth, ctype = struct.unpack('>IIBB', body[:10])
-            assert depth == 8 and ctype in (2, 6), f'{path}: PNG type {ctype}/{depth}'
-            bpp = 3 if ctype == 2 else 4
-        elif kind == b'IDAT':
-            idat += body
-        pos += 12 + n
-    raw, stride = zlib.decompress(idat), w * bpp
-    rows, prev = [], bytearray(stride)
-    for y in range(h):
-        f, line = raw[y * (stride + 1)], bytearray(raw[y * (stride + 1) + 1:(y + 1) * (stride + 1)])
-        for x in range(stride):
-            a = line[x - bpp] if x >= bpp else 0
-            b, c = prev[x], prev[x - bpp] if x >= bpp else 0
-            if f == 1: line[x] = (line[x] + a) & 255
-            elif f == 2: line[x] = (line[x] + b) & 255
-            elif f == 3: line[x] = (line[x] + (a + b) // 2) & 255
-            elif f == 4:
-                p = a + b - c
-                pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
-                line[x] = (line[x] + (a if pa <= pb and pa <= pc else b if pb <= pc else c)) & 255
-        rows.append(line)
-        prev = line
-    return w, h, bpp, rows
+python3 - "$out/first.png" "$out/window/quad.png" "$root/tests" <<'PY'
+import sys
+sys.path.insert(0, sys.argv[3])
+from png_read import read_png
 
 def mean_diff(img1, img2, x0, y0, x1, y1):
     (w, h, bpp, r1), (_, _, _, r2) = img1, img2
