@@ -53,7 +53,7 @@ struct VisionOptions {
   // time; their observations then correct the pose without the drift above (issue 19).
   bool joint_new_points = false;
   int max_state_points = 15;
-  double landmark_sigma_px = 1.5;  // extra noise of a landmark's sighting (a frame-to-frame KLT track: its error persists)
+  double landmark_sigma_px = 1.5;  // extra noise of a landmark's sighting (a KLT track: its error persists)
   // Unknown features seen on the last keyframe are re-matched by KLT against their keyframe patch
   // every frame (after the frame-to-frame step), so a track's error accumulates once per keyframe,
   // not once per frame (issue 19).
