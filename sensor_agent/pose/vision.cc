@@ -33,6 +33,8 @@ struct Track {
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Identity();
   int observations = 0;
   int64_t id = 0;  // landmark id in the pose filter's state (joint mode)
+  cv::Point2f key_px;    // where it was on the last keyframe (unknown_from_keyframe: KLT re-matches against it)
+  bool has_key = false;  // seen on the last keyframe
   double LargestSigma() const {
     return std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(covariance, Eigen::EigenvaluesOnly).eigenvalues().maxCoeff()));
   }
@@ -81,6 +83,7 @@ std::string VisionOptions::Check() const {
   if (lost_frames < 0 || !(lost_orientation_sigma_deg >= 0)) return "lost_frames and lost_orientation_sigma_deg must be >= 0";
   if (!(tracked_sigma_px >= 0)) return "tracked_sigma_px must be >= 0";
   if (!(landmark_sigma_px >= 0)) return "landmark_sigma_px must be >= 0";
+  if (!(join_depth_sigma_scale > 0 && std::isfinite(join_depth_sigma_scale))) return "join_depth_sigma_scale must be finite and > 0";
   if (!(weak_lock_gated_share >= 0 && weak_lock_gated_share <= 1)) return "weak_lock_gated_share must be in [0, 1]";
   if (!(lock_sigma_px > 0)) return "lock_sigma_px must be > 0";
   if (!(visibility_cache_m >= 0)) return "visibility_cache_m must be >= 0";
@@ -376,7 +379,30 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
       before.push_back(t.px);
       after.push_back(predicted_px(t.point, t.px));
     }
-    const std::vector<bool> ok = klt(m.previous_pyramid, before, after);
+    std::vector<bool> ok = klt(m.previous_pyramid, before, after);
+    // Then, for the tracks seen on the last keyframe, KLT again from the keyframe's patch, started
+    // where the frame-to-frame step put them: the track's error no longer accumulates frame after
+    // frame (each step's error adds to a chained track, and the joint filter takes the track's
+    // sightings as independent), only once per keyframe. A track that no longer matches its
+    // keyframe patch, or lands more than 2 px away from its frame-to-frame position, is dropped.
+    if (m.options.unknown_from_keyframe && !m.keyframe_pyramid.empty()) {
+      std::vector<size_t> keyed;
+      std::vector<cv::Point2f> key_before, key_after;
+      for (size_t i = 0; i < m.tracks.size(); ++i) {
+        if (!ok[i] || !m.tracks[i].has_key) continue;
+        keyed.push_back(i);
+        key_before.push_back(m.tracks[i].key_px);
+        key_after.push_back(after[i]);
+      }
+      if (!keyed.empty()) {
+        const std::vector<bool> key_ok = klt(m.keyframe_pyramid, key_before, key_after);
+        for (size_t j = 0; j < keyed.size(); ++j) {
+          const size_t i = keyed[j];
+          ok[i] = key_ok[j] && std::hypot(key_after[j].x - after[i].x, key_after[j].y - after[i].y) <= 2.0;
+          if (ok[i]) after[i] = key_after[j];
+        }
+      }
+    }
     const std::vector<cv::Point2f> after_ideal = m.ToIdeal(after);
     std::vector<Track> kept;
     for (size_t i = 0; i < m.tracks.size(); ++i) {
@@ -617,9 +643,11 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
         // The point is placed on this frame's ray from this frame's pose, at the depth the anchored
         // filter found, with the cross-covariances that placement implies (the issue-19 bug was
         // joining with none: the pose then re-learnt its own error from the point).
+        // Its depth sigma is inflated by join_depth_sigma_scale: the anchored filter takes its frozen
+        // anchor pose as exact and its sightings as independent, and is overconfident by about 2x.
         double depth = 0, depth_sigma = 0;
         if (!DepthFromPose(t.structure, ekf, depth, depth_sigma)) continue;
-        if (ekf.AddLandmarkOnRay(t.id, m.k, t.uv, depth, depth_sigma, ekf.options().pixel_sigma_px)) {
+        if (ekf.AddLandmarkOnRay(t.id, m.k, t.uv, depth, depth_sigma * m.options.join_depth_sigma_scale, ekf.options().pixel_sigma_px)) {
           const auto l = ekf.Landmark(t.id);
           stats.landmarks_joined.push_back({l->first, l->second, t.uv});
         }
@@ -630,7 +658,7 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
     for (const KnownTrack& t : m.known) grid.Add(t.px.x, t.px.y);
     for (const Track& t : m.tracks) grid.Add(t.px.x, t.px.y);
     for (const auto& p : predicted) grid.Add(p.second.x(), p.second.y());
-    if (static_cast<int>(m.tracks.size()) < m.options.max_new_points) {
+    if (static_cast<int>(m.tracks.size()) < m.options.max_new_points && (!m.options.unknown_after_lock || m.good_full_matches >= m.options.lock_frames)) {
       if (!keyframe) {
         // Between keyframes: corners on a coarser pyramid level inside the thin cells only, then
         // refined to sub-pixel on the full image.
@@ -659,11 +687,15 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
       }
     }
     stats.new_points_tracked = static_cast<int>(m.tracks.size());
+    for (const Track& t : m.tracks) stats.unknown_tracks.emplace_back(t.id, t.uv);
     stats.landmarks_in_state = ekf.landmark_count();
     for (const Track& t : m.tracks) stats.new_points_converged += t.observations >= m.options.new_point_min_observations && t.LargestSigma() <= m.options.new_point_sigma_m;
     timer.Lap(kStageUnknown);
   }
-  if (keyframe) m.keyframe_pyramid = pyramid;  // shares the pixels
+  if (keyframe) {
+    m.keyframe_pyramid = pyramid;  // shares the pixels
+    for (Track& t : m.tracks) t.key_px = t.px, t.has_key = true;
+  }
   m.previous_pyramid = std::move(pyramid);
   for (int s = 0; s < kVisionStageCount; ++s) (s == kStageEkf || s == kStageUnknown ? stats.update_ms : stats.detect_ms) += stats.stage_ms[s];
   return stats;

@@ -327,6 +327,20 @@ int RunPose(const PoseBenchOptions& o) {
                     [](pose::VisionOptions& v) { v.new_points_in_pose = true; }});
     runs.push_back({50, "unknown points in the state, cross-covariances kept", "gps_imu_vision_joint_50",
                     [](pose::VisionOptions& v) { v.joint_new_points = true; }});
+    runs.push_back({50, "unknown points in the state, tracked frame to frame only (before issue 19 part 3)", "gps_imu_vision_joint_50_frame_to_frame",
+                    [](pose::VisionOptions& v) {
+                      v.joint_new_points = true;
+                      v.unknown_from_keyframe = false;
+                    }});
+    auto joint = [&](const std::string& knob, const std::string& key, std::function<void(pose::VisionOptions&)> tweak) {
+      runs.push_back({50, "unknown points in the state, " + knob, "gps_imu_vision_joint_50_" + key, [tweak](pose::VisionOptions& v) {
+                        v.joint_new_points = true;
+                        tweak(v);
+                      }});
+    };
+    joint("depth sigma not inflated at joining (before issue 19 part 3)", "depth_sigma_1", [](pose::VisionOptions& v) { v.join_depth_sigma_scale = 1; });
+    joint("new tracks only while locked", "after_lock", [](pose::VisionOptions& v) { v.unknown_after_lock = true; });
+    joint("joining at 0.5 m sigma (from 0.3)", "sigma_05", [](pose::VisionOptions& v) { v.new_point_sigma_m = 0.5; });
     runs.push_back({50, "unknown points in the state, landmark sightings at 3 px extra noise", "gps_imu_vision_joint_50_landmark_3px",
                     [](pose::VisionOptions& v) {
                       v.joint_new_points = true;
