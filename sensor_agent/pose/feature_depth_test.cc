@@ -63,7 +63,9 @@ TEST(AnchoredPoint, ConvergesToTheTrueDepthNearAndFarWithHonestSigmas) {
       const double nees = error.dot(a->PointCovariance().ldlt().solve(error));
       inside_3_sigma += nees < 14.2;  // chi2(3) 99.7 %
       ++trials;
-      if (depth <= 3.0) EXPECT_LT(a->LargestSigma(), 0.3) << "a near point converges in a second of walking";
+      if (depth <= 3.0) {
+        EXPECT_LT(a->LargestSigma(), 0.3) << "a near point converges in a second of walking";
+      }
       EXPECT_LT(error.norm(), depth * 0.5) << depth;
     }
   }
