@@ -47,6 +47,16 @@ endfunction()
 # (+ LeakSanitizer) and UndefinedBehaviorSanitizer; the DEPS (Debian's and our own libraries) are not.
 # Used by fusion_server/fuzz/ and sensor_agent/fuzz/ (each stays within its component's layering).
 set(AVE_FUZZ_FLAGS -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined -g -O1)
+# ave_fuzz_objects(NAME SRCS ... DEPS ...): code under test compiled once with the fuzz flags, for
+# several targets to link (in their DEPS) instead of each compiling it again; DEPS give it include
+# paths and are linked into whoever links it.
+function(ave_fuzz_objects name)
+  cmake_parse_arguments(ARG "" "" "SRCS;DEPS" ${ARGN})
+  add_library(${name} OBJECT ${ARG_SRCS})
+  target_include_directories(${name} PRIVATE ${PROJECT_SOURCE_DIR})
+  target_compile_options(${name} PRIVATE ${AVE_FUZZ_FLAGS})
+  target_link_libraries(${name} PUBLIC ${ARG_DEPS})
+endfunction()
 function(ave_fuzzer name)
   cmake_parse_arguments(ARG "" "" "SRCS;DEPS" ${ARGN})
   add_executable(${name} ${ARG_SRCS})
