@@ -25,7 +25,7 @@ if [ "${AVE_LOADED_REPEAT:-3}" != 0 ]; then
 fi
 # Every parser of outside input under libFuzzer for a short bounded time (clang build of its own;
 # AVE_FUZZ_SECONDS=0 skips it; the long runs are recorded in docs/RELIABILITY.md).
-if [ "${AVE_FUZZ_SECONDS:-15}" != 0 ]; then
-  AVE_FUZZ_SECONDS=${AVE_FUZZ_SECONDS:-15} AVE_FUZZ_BUILD=${AVE_FUZZ_BUILD:-$build-fuzz} bash "$root/deploy/fuzz.sh"
+if [ "${AVE_FUZZ_SECONDS:-10}" != 0 ]; then
+  AVE_FUZZ_SECONDS=${AVE_FUZZ_SECONDS:-10} AVE_FUZZ_BUILD=${AVE_FUZZ_BUILD:-$build-fuzz} bash "$root/deploy/fuzz.sh"
 fi
 echo "build + tests: $(( $(date +%s) - start )) s"
