@@ -6,6 +6,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "fusion_server/core/convert.h"
+#include "model_store/image/jpeg_header.h"
 
 namespace ave {
 namespace {
@@ -27,46 +28,21 @@ absl::StatusOr<JpegInfo> ParseJpegHeader(std::string_view b) {
     return absl::InvalidArgumentError(
         absl::StrCat("truncated JPEG: no end-of-image marker at byte ", b.size() - 2, " of ", b.size()));
   }
-  size_t pos = 2;
-  while (pos + 4 <= b.size()) {
-    if (byte(pos) != 0xFF) {
-      return absl::InvalidArgumentError(absl::StrCat("corrupt JPEG: expected a marker at byte ", pos));
-    }
-    const uint8_t marker = byte(pos + 1);
-    if (marker == 0xFF) {  // fill byte
-      ++pos;
-      continue;
-    }
-    if (marker == 0xD8 || marker == 0x01 || (marker >= 0xD0 && marker <= 0xD7)) {  // no length
-      pos += 2;
-      continue;
-    }
-    if (marker == 0xD9 || marker == 0xDA) break;  // EOI or start of scan before any SOF
-    const size_t length = (size_t{byte(pos + 2)} << 8) | byte(pos + 3);
-    if (length < 2 || pos + 2 + length > b.size()) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("truncated JPEG: segment 0xFF", absl::Hex(marker), " at byte ", pos, " runs past the end"));
-    }
-    const bool is_sof = marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC;
-    if (is_sof) {
-      if (length < 8) return absl::InvalidArgumentError(absl::StrCat("corrupt JPEG: short frame header at byte ", pos));
-      JpegInfo info;
-      info.height = (int{byte(pos + 5)} << 8) | byte(pos + 6);
-      info.width = (int{byte(pos + 7)} << 8) | byte(pos + 8);
-      info.components = byte(pos + 9);
-      info.progressive = marker == 0xC2 || marker == 0xC6 || marker == 0xCA || marker == 0xCE;
-      if (info.width <= 0 || info.height <= 0 || info.width > kMaxJpegSide || info.height > kMaxJpegSide) {
-        return absl::InvalidArgumentError(
-            absl::StrCat("JPEG dimensions ", info.width, "x", info.height, " outside 1..", kMaxJpegSide));
-      }
-      if (info.components != 1 && info.components != 3) {
-        return absl::InvalidArgumentError(absl::StrCat("JPEG has ", info.components, " components (1 or 3 supported)"));
-      }
-      return info;
-    }
-    pos += 2 + length;
+  absl::StatusOr<image::JpegFrameHeader> sof = image::FindJpegFrameHeader(b);
+  if (!sof.ok()) return sof.status();
+  JpegInfo info;
+  info.width = sof->width;
+  info.height = sof->height;
+  info.components = sof->components;
+  info.progressive = sof->progressive;
+  if (info.width <= 0 || info.height <= 0 || info.width > kMaxJpegSide || info.height > kMaxJpegSide) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("JPEG dimensions ", info.width, "x", info.height, " outside 1..", kMaxJpegSide));
   }
-  return absl::InvalidArgumentError("corrupt JPEG: no frame header (SOF) before the image data");
+  if (info.components != 1 && info.components != 3) {
+    return absl::InvalidArgumentError(absl::StrCat("JPEG has ", info.components, " components (1 or 3 supported)"));
+  }
+  return info;
 }
 
 bool IsValidCameraId(std::string_view id) {

@@ -1,4 +1,5 @@
 #include "model_store/image/image_decode.h"
+#include "model_store/image/jpeg_header.h"
 
 #include <algorithm>
 #include <cerrno>
@@ -23,38 +24,13 @@ constexpr size_t kMaxImageBytes = size_t{256} << 20;
 uint8_t At(std::string_view b, size_t i) { return static_cast<uint8_t>(b[i]); }
 
 absl::StatusOr<ImageHeader> PeekJpeg(std::string_view b) {
-  size_t pos = 2;
-  while (pos + 4 <= b.size()) {
-    if (At(b, pos) != 0xFF) return absl::InvalidArgumentError(absl::StrCat("corrupt JPEG: expected a marker at byte ", pos));
-    const uint8_t marker = At(b, pos + 1);
-    if (marker == 0xFF) {  // fill byte
-      ++pos;
-      continue;
-    }
-    if (marker == 0xD8 || marker == 0x01 || (marker >= 0xD0 && marker <= 0xD7)) {  // no length
-      pos += 2;
-      continue;
-    }
-    if (marker == 0xD9 || marker == 0xDA) {
-      return absl::InvalidArgumentError(absl::StrCat("corrupt JPEG: no frame header (SOF) before byte ", pos));
-    }
-    const size_t length = (size_t{At(b, pos + 2)} << 8) | At(b, pos + 3);
-    if (length < 2 || pos + 2 + length > b.size()) {
-      return absl::InvalidArgumentError(
-          absl::StrFormat("truncated JPEG: segment 0xFF%02X at byte %d runs past the end (%d bytes)", marker, pos, b.size()));
-    }
-    const bool is_sof = marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC;
-    if (is_sof) {
-      if (length < 8) return absl::InvalidArgumentError(absl::StrCat("corrupt JPEG: short frame header at byte ", pos));
-      ImageHeader h;
-      h.format = ImageFormat::kJpeg;
-      h.height = (int{At(b, pos + 5)} << 8) | At(b, pos + 6);
-      h.width = (int{At(b, pos + 7)} << 8) | At(b, pos + 8);
-      return h;
-    }
-    pos += 2 + length;
-  }
-  return absl::InvalidArgumentError(absl::StrCat("truncated JPEG: no frame header (SOF) in ", b.size(), " bytes"));
+  absl::StatusOr<JpegFrameHeader> sof = FindJpegFrameHeader(b);
+  if (!sof.ok()) return sof.status();
+  ImageHeader h;
+  h.format = ImageFormat::kJpeg;
+  h.width = sof->width;
+  h.height = sof->height;
+  return h;
 }
 
 absl::StatusOr<ImageHeader> PeekPng(std::string_view b) {
