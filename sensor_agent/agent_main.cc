@@ -276,7 +276,10 @@ int main(int argc, char** argv) {
             << ",\"frames_acked\":" << s.frames_acked << ",\"connects\":" << s.connects
             << ",\"bytes_sent\":" << s.bytes_sent << ",\"metadata_buffered\":" << s.metadata_buffered
             << ",\"metadata_replayed\":" << s.metadata_replayed << ",\"metadata_dropped\":" << s.metadata_dropped
-            << ",\"clock_offset_ms\":" << s.clock_offset_ns / 1e6 << "}" << std::endl;
+            << ",\"clock_offset_ms\":" << s.clock_offset_ns / 1e6 << ",\"source_outages\":" << s.source_outages
+            << ",\"source_errors\":" << s.source_errors << ",\"source_down_s\":" << s.source_down_s
+            << ",\"source_drop_outs\":" << s.source_drop_outs << ",\"source_reconnects\":" << s.source_reconnects << "}"
+            << std::endl;
   if (!status.ok()) {
     std::cerr << "ave-agent: " << status.message() << "\n";
     return 1;

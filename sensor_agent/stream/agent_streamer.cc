@@ -10,6 +10,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "ave/v1/ave.grpc.pb.h"
 #include "fusion_server/core/convert.h"
 #include "model_store/common/log.h"
@@ -50,6 +51,9 @@ std::string AgentOptions::Check() const {
   if (max_frames < 0) return "max_frames must be >= 0";
   if (!(duration_s >= 0)) return "duration_s must be >= 0";
   if (backoff_initial.count() <= 0 || backoff_max < backoff_initial) return "backoff must be 0 < initial <= max";
+  if (source_retry_initial.count() <= 0 || source_retry_max < source_retry_initial) {
+    return "source retry must be 0 < initial <= max";
+  }
   if (metadata_in_memory == 0) return "metadata_in_memory must be > 0";
   return {};
 }
@@ -69,6 +73,54 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
   std::mt19937_64 rng(std::hash<std::string>{}(id) ^ static_cast<uint64_t>(Clock::now().time_since_epoch().count()));
   const auto started = Clock::now();
   auto backoff = options_.backoff_initial;
+  // A source that stops delivering: retried with a doubling wait, logged at each doubling, then
+  // every source_log_every; its outages and their length go to the stats and the summary line.
+  struct SourceDown {
+    AgentStreamer& self;
+    const std::string& id;
+    const std::atomic<bool>& stop;
+    int64_t failures = 0;  // in the current outage
+    Clock::time_point since, last_log;
+    std::chrono::milliseconds wait{0}, last_wait{0};
+    void Failed(std::string_view why) {
+      const auto now = Clock::now();
+      const AgentOptions& o = self.options_;
+      if (failures == 0) {
+        since = now;
+        wait = o.source_retry_initial;
+        last_wait = std::chrono::milliseconds(0);
+        std::lock_guard lock(self.stats_mu_);
+        ++self.stats_.source_outages;
+      }
+      ++failures;
+      {
+        std::lock_guard lock(self.stats_mu_);
+        ++self.stats_.source_errors;
+        self.stats_.last_error = std::string(why);
+      }
+      // Logged while the wait grows (its last step included), then every source_log_every.
+      const bool growing = failures == 1 || wait < o.source_retry_max || last_wait < o.source_retry_max;
+      last_wait = wait;
+      if (growing || now - last_log >= o.source_log_every) {
+        last_log = now;
+        AVE_LOG(WARNING) << "camera '" << id << "': " << why << " (" << failures << " failed read"
+                         << (failures == 1 ? "" : "s") << " in "
+                         << absl::StrFormat("%.1f", std::chrono::duration<double>(now - since).count())
+                         << " s; next try in " << wait.count() << " ms)";
+      }
+      SleepUnlessStopped(wait, stop);
+      wait = std::min(o.source_retry_max, wait * 2);
+    }
+    void Delivered() {
+      if (failures == 0) return;
+      const double down = std::chrono::duration<double>(Clock::now() - since).count();
+      AVE_LOG(INFO) << "camera '" << id << "': source back after " << absl::StrFormat("%.1f", down) << " s ("
+                    << failures << " failed reads)";
+      std::lock_guard lock(self.stats_mu_);
+      self.stats_.source_down_s += down;
+      failures = 0;
+    }
+  } source_down{*this, id, stop};
   uint64_t sequence = 0;
   int64_t sent_total = 0;
   bool source_done = false;
@@ -204,10 +256,10 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
           source_done = true;
           break;
         }
-        AVE_LOG(WARNING) << "camera '" << id << "': " << frame.status().message();
-        SleepUnlessStopped(std::chrono::milliseconds(200), stop);
+        source_down.Failed(std::string(frame.status().message()));
         continue;
       }
+      source_down.Delivered();
       {
         std::lock_guard lock(stats_mu_);
         ++stats_.frames_captured;
@@ -282,10 +334,17 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
       backoff = std::min(options_.backoff_max, backoff * 2);
     }
   }
+  {
+    std::lock_guard lock(stats_mu_);
+    stats_.source_drop_outs = source_->drop_outs();
+    stats_.source_reconnects = source_->reconnects();
+  }
   const AgentStats s = stats();
   AVE_LOG(INFO) << "camera '" << id << "': stopped after " << s.frames_sent << " frames sent, " << s.frames_acked
                 << " acked, " << s.connects << " connections, " << s.metadata_replayed << "/" << s.metadata_buffered
-                << " buffered metadata records replayed";
+                << " buffered metadata records replayed; source: " << s.source_outages << " outages ("
+                << absl::StrFormat("%.1f", s.source_down_s) << " s down, " << s.source_errors << " failed reads), "
+                << s.source_drop_outs << " drop-outs, " << s.source_reconnects << " reconnects";
   return absl::OkStatus();
 }
 

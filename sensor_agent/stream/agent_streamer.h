@@ -44,6 +44,12 @@ struct AgentOptions {
   std::chrono::milliseconds backoff_initial{200};
   // Kept at 2 s so that an agent is back within ~2.5 s of the server's return (issue 8: 5 s).
   std::chrono::milliseconds backoff_max{2000};
+  // A source that fails to deliver (a network camera down, a read error) is retried after
+  // `source_retry_initial`, doubling to `source_retry_max` while it stays down, and logged at each
+  // doubling and then once every `source_log_every` (not at every attempt).
+  std::chrono::milliseconds source_retry_initial{200};
+  std::chrono::milliseconds source_retry_max{5000};
+  std::chrono::milliseconds source_log_every{30000};
   // A link that silently stops carrying data (a blocked route, a dead Wi-Fi) is detected by HTTP/2
   // keepalive pings: unanswered for `keepalive` after `keepalive` of silence = the link is dead,
   // the stream fails and the agent reconnects. Also bounds a connection attempt that hangs.
@@ -79,6 +85,11 @@ struct AgentStats {
   // The highest SensorAck.recorded_sequence (issue 18): that frame is on the server's disk and
   // indexed; a server crash cannot lose it. 0: none yet, or the server does not record.
   uint64_t recorded_sequence = 0;
+  int64_t source_errors = 0;      // reads the source failed (each retry counts)
+  int64_t source_outages = 0;     // runs of failed reads ended by a frame or still going
+  double source_down_s = 0;       // time spent in the runs that ended
+  int64_t source_drop_outs = 0;   // a network source's own count (at the end of Run)
+  int64_t source_reconnects = 0;
   std::string last_error;
 };
 

@@ -5,6 +5,7 @@
 
 
 #include <filesystem>
+#include <set>
 #include <thread>
 
 #include <gtest/gtest.h>
@@ -161,6 +162,51 @@ TEST_F(AgentFaults, OutageMetadataIsReplayedInOrderAndSkewIsCorrected) {
   ASSERT_NE(latest, nullptr);
   const int64_t capture_on_server = latest->capture_time_ns() + latest->clock_offset_ns();
   EXPECT_NEAR(static_cast<double>(capture_on_server), static_cast<double>(NowNs()), 2e9);
+}
+
+// A source that fails on the given reads (0-based), as a network camera that goes down does.
+class FlakySource final : public FakeSource {
+ public:
+  explicit FlakySource(std::set<int> failing) : failing_(std::move(failing)) {}
+  absl::StatusOr<CapturedFrame> Next() override {
+    if (failing_.count(reads_++) > 0) return absl::UnavailableError("fake: stream down");
+    return FakeSource::Next();
+  }
+
+ private:
+  std::set<int> failing_;
+  int reads_ = 0;
+};
+
+TEST_F(AgentFaults, ASourceThatGoesDownIsRetriedWithADoublingWaitAndItsOutagesCounted) {
+  AgentOptions options;
+  options.server = Address();
+  options.camera_id = "cam";
+  options.token = "sensor";
+  options.fps = 200;
+  options.max_frames = 12;
+  options.spill_path = "-";
+  options.source_retry_initial = std::chrono::milliseconds(10);
+  options.source_retry_max = std::chrono::milliseconds(40);
+  // Two outages: reads 2-6 (five failures: waits 10, 20, 40, 40, 40 ms) and 10-12 (10, 20, 40 ms).
+  AgentStreamer streamer(options, std::make_unique<FlakySource>(std::set<int>{2, 3, 4, 5, 6, 10, 11, 12}));
+  std::atomic<bool> stop{false};
+  const absl::Status status = streamer.Run(stop);
+  ASSERT_TRUE(status.ok()) << status;
+  const AgentStats s = streamer.stats();
+  EXPECT_EQ(s.frames_sent, 12);
+  EXPECT_EQ(s.source_errors, 8);
+  EXPECT_EQ(s.source_outages, 2);
+  EXPECT_GE(s.source_down_s, 0.219) << "the waits double from 10 ms to 40 ms: 150 + 70 ms at least";
+  EXPECT_EQ(s.last_error, "fake: stream down");
+}
+
+TEST(AgentOptions, ASourceRetryThatCannotDoubleIsRefused) {
+  AgentOptions options;
+  options.camera_id = "cam";
+  options.source_retry_initial = std::chrono::milliseconds(100);
+  options.source_retry_max = std::chrono::milliseconds(50);
+  EXPECT_EQ(options.Check(), "source retry must be 0 < initial <= max");
 }
 
 }  // namespace
