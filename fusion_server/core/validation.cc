@@ -11,7 +11,7 @@
 namespace ave {
 namespace {
 
-constexpr int kMaxJpegSide = 16384;
+constexpr int kMaxJpegSide = image::kMaxImageSide;
 // Time stamps up to the year 2096 and clock offsets up to a day keep every sum of the two (and
 // differences with the server's clock) far inside int64.
 constexpr int64_t kMaxTimeNs = 4'000'000'000'000'000'000;
@@ -38,6 +38,10 @@ absl::StatusOr<JpegInfo> ParseJpegHeader(std::string_view b) {
   if (info.width <= 0 || info.height <= 0 || info.width > kMaxJpegSide || info.height > kMaxJpegSide) {
     return absl::InvalidArgumentError(
         absl::StrCat("JPEG dimensions ", info.width, "x", info.height, " outside 1..", kMaxJpegSide));
+  }
+  if (int64_t{info.width} * info.height > image::kMaxImagePixels) {
+    return absl::InvalidArgumentError(absl::StrCat("JPEG dimensions ", info.width, "x", info.height, " over ",
+                                                   image::kMaxImagePixels >> 20, " Mpx (viewers could not decode it)"));
   }
   if (info.components != 1 && info.components != 3) {
     return absl::InvalidArgumentError(absl::StrCat("JPEG has ", info.components, " components (1 or 3 supported)"));

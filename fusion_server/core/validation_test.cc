@@ -7,6 +7,8 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
+#include "model_store/image/jpeg_header.h"
+
 namespace ave {
 namespace {
 
@@ -102,6 +104,24 @@ TEST(ValidateFrame, RejectsTimeStampsAndClockOffsetsThatCouldOverflow) {
   EXPECT_TRUE(ValidateFrame(f, Intrinsics(64, 48), 0, {}).ok());
   f.set_capture_time_ns(9'000'000'000'000'000'000);
   EXPECT_THAT(std::string(ValidateFrame(f, Intrinsics(64, 48), 0, {}).message()), HasSubstr("capture_time_ns"));
+}
+
+TEST(ParseJpegHeader, AFrameOverTheViewersPixelLimitIsRefusedThoughEachSideFits) {
+  std::string jpeg = EncodeJpeg(320, 200, false);
+  const auto sof = image::FindJpegFrameHeader(jpeg);
+  ASSERT_TRUE(sof.ok()) << sof.status();
+  auto set_size = [&](int w, int h) {
+    jpeg[sof->offset + 5] = static_cast<char>(h >> 8);
+    jpeg[sof->offset + 6] = static_cast<char>(h & 0xFF);
+    jpeg[sof->offset + 7] = static_cast<char>(w >> 8);
+    jpeg[sof->offset + 8] = static_cast<char>(w & 0xFF);
+  };
+  set_size(10000, 10000);  // 100 Mpx, each side under 16384
+  EXPECT_THAT(std::string(ParseJpegHeader(jpeg).status().message()), HasSubstr("10000x10000 over 64 Mpx"));
+  set_size(8192, 8192);  // exactly 64 Mpx
+  const auto at_limit = ParseJpegHeader(jpeg);
+  ASSERT_TRUE(at_limit.ok()) << at_limit.status();
+  EXPECT_EQ(at_limit->width, 8192);
 }
 
 TEST(ValidateFrame, MetadataOnlyFramesCarryNoJpeg) {

@@ -12,6 +12,7 @@
 #include <opencv2/core/mat.hpp>
 
 #include "absl/status/statusor.h"
+#include "model_store/image/jpeg_header.h"
 
 namespace ave::image {
 
@@ -24,8 +25,8 @@ struct ImageHeader {
 };
 
 struct DecodeLimits {
-  int max_side = 16384;                     // the server's JPEG limit (fusion_server/core/validation.cc)
-  int64_t max_pixels = int64_t{64} << 20;   // 64 Mpx: 192 MiB as BGR
+  int max_side = kMaxImageSide;          // the server's limits too (fusion_server/core/validation.cc)
+  int64_t max_pixels = kMaxImagePixels;
 };
 
 enum class Channels { kColor, kGray };  // CV_8UC3 (BGR) or CV_8UC1

@@ -12,6 +12,11 @@
 
 namespace ave::image {
 
+// The largest image accepted from outside, by the server (frames) and every decoder: a side and a
+// pixel count (64 Mpx: 192 MiB as BGR).
+inline constexpr int kMaxImageSide = 16384;
+inline constexpr int64_t kMaxImagePixels = int64_t{64} << 20;
+
 struct JpegFrameHeader {
   int width = 0;
   int height = 0;
