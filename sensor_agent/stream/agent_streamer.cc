@@ -22,6 +22,8 @@ namespace {
 
 using Clock = stream_link::Clock;
 using stream_link::IsFatal;
+using stream_link::JitteredWait;
+using stream_link::PaceTo;
 using stream_link::SleepUnlessStopped;
 
 }  // namespace
@@ -289,9 +291,7 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
       if (acked_once) backoff = options_.backoff_initial;  // the link works again
       // Pace non-live sources: the slower of our rate and the server's hint.
       if (!source_->live()) {
-        next_tick += std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / pace()));
-        if (next_tick < Clock::now()) next_tick = Clock::now();
-        SleepUnlessStopped(next_tick - Clock::now(), stop);
+        PaceTo(next_tick, pace(), stop);
       }
     }
 
@@ -314,8 +314,7 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
       if (source_done || limited(Clock::now())) break;
       // Jittered exponential backoff: a random wait in [backoff/2, backoff], then double it. The
       // camera keeps capturing meanwhile; each frame's metadata goes to the buffer.
-      std::uniform_int_distribution<int64_t> jitter(backoff.count() / 2, backoff.count());
-      const auto wait = std::chrono::milliseconds(jitter(rng));
+      const auto wait = JitteredWait(backoff, rng);
       AVE_LOG(WARNING) << "camera '" << id << "': stream ended (" << status.error_message() << "); reconnecting in "
                        << wait.count() << " ms (" << buffer.size() << " metadata records buffered)";
       const auto until = Clock::now() + wait;

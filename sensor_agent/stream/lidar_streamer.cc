@@ -20,6 +20,8 @@ namespace {
 
 using Clock = stream_link::Clock;
 using stream_link::IsFatal;
+using stream_link::JitteredWait;
+using stream_link::PaceTo;
 using stream_link::SleepUnlessStopped;
 
 void PutLe16(std::string& out, uint16_t v) {
@@ -234,9 +236,7 @@ absl::Status LidarStreamer::Run(const std::atomic<bool>& stop) {
       });
       if (acked_once) backoff = options_.backoff_initial;
       if (options_.pace_hz > 0) {
-        next_tick += std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / options_.pace_hz));
-        if (next_tick < Clock::now()) next_tick = Clock::now();
-        SleepUnlessStopped(next_tick - Clock::now(), stop);
+        PaceTo(next_tick, options_.pace_hz, stop);
       }
     }
     if (stop.load()) context.TryCancel();
@@ -255,8 +255,7 @@ absl::Status LidarStreamer::Run(const std::atomic<bool>& stop) {
       if (source_done || limited()) break;
       // Jittered exponential backoff; the tracker keeps seeing every sweep meanwhile (stable ids),
       // the sweeps themselves are dropped.
-      std::uniform_int_distribution<int64_t> jitter(backoff.count() / 2, backoff.count());
-      const auto wait = std::chrono::milliseconds(jitter(rng));
+      const auto wait = JitteredWait(backoff, rng);
       AVE_LOG(WARNING) << "lidar '" << id << "': stream ended (" << status.error_message() << "); reconnecting in "
                        << wait.count() << " ms";
       const auto until = Clock::now() + wait;

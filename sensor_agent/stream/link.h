@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <random>
 #include <thread>
 
 #include <grpcpp/grpcpp.h>
@@ -19,6 +20,20 @@ inline void SleepUnlessStopped(Clock::duration duration, const std::atomic<bool>
   while (!stop.load() && Clock::now() < until) {
     std::this_thread::sleep_for(std::min<Clock::duration>(until - Clock::now(), std::chrono::milliseconds(20)));
   }
+}
+
+// Paces a loop at `hz`: moves `next_tick` on by one period (never behind now) and sleeps until it.
+inline void PaceTo(Clock::time_point& next_tick, double hz, const std::atomic<bool>& stop) {
+  next_tick += std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / hz));
+  if (next_tick < Clock::now()) next_tick = Clock::now();
+  SleepUnlessStopped(next_tick - Clock::now(), stop);
+}
+
+// Jittered exponential backoff: a random wait in [backoff/2, backoff] (the caller doubles it).
+template <class Rng>
+std::chrono::milliseconds JitteredWait(std::chrono::milliseconds backoff, Rng& rng) {
+  std::uniform_int_distribution<int64_t> jitter(backoff.count() / 2, backoff.count());
+  return std::chrono::milliseconds(jitter(rng));
 }
 
 // The server refused this sensor's credentials: retrying cannot help.
