@@ -22,22 +22,8 @@ cat >"$out/drive.sh" <<'SH'
 # Runs inside the virtual display: waits for the viewer window, then types and drags.
 set -uo pipefail
 out=$1
-# Whatever goes wrong here, the viewer must not be left waiting for an Esc that never comes.
-give_up() { echo "drive: $1" >"$out/drive.log"; pkill -f -- "--snapshot $out/window/quad.png"; exit 1; }
-win=""
-for _ in $(seq 1 600); do
-  # Only a mapped (viewable) window can take the input focus.
-  win=$(xdotool search --onlyvisible --name '^AVE' 2>/dev/null | head -1)
-  [ -n "$win" ] && break
-  sleep 0.1
-done
-[ -n "$win" ] || give_up "no viewer window within 60 s"
-focused=0
-for _ in $(seq 1 50); do
-  if xdotool windowfocus --sync "$win" 2>/dev/null; then focused=1; break; fi
-  sleep 0.2
-done
-[ "$focused" = 1 ] || give_up "could not focus the viewer window"
+source "$2/tests/window_drive_lib.sh"
+focus_viewer_window
 trap 'give_up "an xdotool step failed"' ERR
 sleep 3                                  # live video and objects arrive
 xdotool key --delay 50 p                 # snapshot 1
@@ -58,7 +44,7 @@ chmod +x "$out/drive.sh"
 
 cat >"$out/session.sh" <<SH
 #!/usr/bin/env bash
-"$out/drive.sh" "$out" &
+"$out/drive.sh" "$out" "$root" &
 # Last resort: a viewer still open after two minutes is closed (the test then fails on its checks).
 ( sleep 120; pkill -f -- "--snapshot $out/window/quad.png" ) >/dev/null 2>&1 &
 AVE_SKIP_DEPS=1 AVE_SKIP_BUILD=1 AVE_BUILD_DIR="$build" AVE_DEMO_OUT="$out/window" AVE_DEMO_FPS=5 \

@@ -28,8 +28,8 @@ cat >"$out/drive.sh" <<'SH'
 # drags and clicks. Every wait is for an event; the loop bounds only guard against a hang.
 set -uo pipefail
 out=$1
+source "$2/tests/window_drive_lib.sh"
 log=$out/window/viewer.log
-give_up() { echo "drive: $1" >"$out/drive.log"; pkill -f -- "--snapshot $out/window/quad.png"; exit 1; }
 # wait_for REGEX TENTHS: until viewer.log has a line matching REGEX (extended); prints the last one.
 wait_for() {
   local line
@@ -51,19 +51,7 @@ snapshot() {
   cp "$out/window/quad.png" "$out/$1.png"
   grep 'viewer: replay time line at' "$log" | tail -1 >"$out/$1.layout"
 }
-win=""
-for _ in $(seq 1 600); do
-  win=$(xdotool search --onlyvisible --name '^AVE' 2>/dev/null | head -1)
-  [ -n "$win" ] && break
-  sleep 0.1
-done
-[ -n "$win" ] || give_up "no viewer window within 60 s"
-focused=0
-for _ in $(seq 1 50); do
-  if xdotool windowfocus --sync "$win" 2>/dev/null; then focused=1; break; fi
-  sleep 0.2
-done
-[ "$focused" = 1 ] || give_up "could not focus the viewer window"
+focus_viewer_window
 trap 'give_up "an xdotool step failed"' ERR
 
 rec=$(wait_for 'viewer: the server records [1-9][0-9]* cameras, from [1-9]' 600) ||
@@ -116,7 +104,7 @@ chmod +x "$out/drive.sh"
 
 cat >"$out/session.sh" <<SH
 #!/usr/bin/env bash
-"$out/drive.sh" "$out" &
+"$out/drive.sh" "$out" "$root" &
 # Last resort: a viewer still open after three minutes is closed (the test then fails on its checks).
 ( sleep 180; pkill -f -- "--snapshot $out/window/quad.png" ) >/dev/null 2>&1 &
 AVE_SKIP_DEPS=1 AVE_SKIP_BUILD=1 AVE_BUILD_DIR="$build" AVE_DEMO_OUT="$out/window" AVE_DEMO_FPS=5 \
