@@ -62,19 +62,39 @@ TEST_F(StudioTruth, ShadowRemovalKeepsTheShadowOutOfTheSilhouettes) {
 
 TEST_F(StudioTruth, HullMatchesTheTrueActor) {
   // The visual hull of this walking body is larger than the body: the gaps between legs and
-  // between arms and torso are hidden in most views, and every limb is a box whose hull grows
-  // wedges between the 13 ring directions (ConvexActorsHullIsTight): IoU ~0.83 (ave-bench
-  // studio), the same as strict carving since no camera is bad here.
-  EXPECT_GT(good_iou_, 0.78);
+  // between arms and torso are hidden in most views (the body's rounded parts are each nearly
+  // their own hull, ConvexActorsHullIsTight): IoU ~0.91 at 10 and 20 mm (ave-bench studio), the
+  // same as strict carving since no camera is bad here. The boxes actor scored ~0.83.
+  std::printf("frame set 3, 20 mm: volume IoU %.4f\n", good_iou_);
+  EXPECT_GT(good_iou_, 0.88);
   ReconstructOptions strict = Options20mm();
   strict.hull.max_background_votes = 0;
   absl::StatusOr<FrameSetResult> r = ReconstructFrameSet(set_->cameras, set_->images, set_->backgrounds, strict);
   ASSERT_TRUE(r.ok());
-  EXPECT_GT(HullVolumeIoU(r->hull, set_->truth_mesh), 0.78);
-  EXPECT_LT(ChamferMm(r->surface, set_->truth_mesh), 15.0);
+  EXPECT_GT(HullVolumeIoU(r->hull, set_->truth_mesh), 0.88);
+  const double chamfer = ChamferMm(r->surface, set_->truth_mesh);
+  std::printf("strict: Chamfer %.2f mm\n", chamfer);
+  EXPECT_LT(chamfer, 8.0);
   // Textured: every vertex has uv in the atlas.
   ASSERT_EQ(r->textured.uv.size(), r->textured.positions_m.size());
   for (const Eigen::Vector2f& uv : r->textured.uv) ASSERT_TRUE(uv.x() >= 0 && uv.x() <= 1 && uv.y() >= 0 && uv.y() <= 1);
+}
+
+// The same frame of the boxes actor (same skeleton and walk): each box grows wedges between the
+// ring's views that the body's rounded parts do not, so from the true silhouettes its hull is
+// looser (ave-bench studio at 10 mm: ~0.84 against the body's ~0.92).
+TEST_F(StudioTruth, BoxesActorsHullIsLooserThanTheBodys) {
+  absl::StatusOr<SimulatedFrameSet> boxes = SimulateStudioFrameSet(3, 0, sim::StudioActor::kBoxes);
+  ASSERT_TRUE(boxes.ok()) << boxes.status();
+  EXPECT_EQ(boxes->truth_mesh.TriangleCount(), 13u * 12u);
+  HullOptions o = Options20mm().hull;
+  o.max_background_votes = 0;
+  absl::StatusOr<VoxelGrid> box_hull = CarveVisualHull(boxes->cameras, boxes->truth_silhouettes, o);
+  ASSERT_TRUE(box_hull.ok());
+  const double box_iou = HullVolumeIoU(*box_hull, boxes->truth_mesh), body_iou = IoU(set_->cameras, set_->truth_silhouettes, Options20mm());
+  std::printf("hull of the true silhouettes, 20 mm: body %.4f, boxes %.4f\n", body_iou, box_iou);
+  EXPECT_GT(body_iou, box_iou + 0.04);
+  EXPECT_GT(box_iou, 0.78);
 }
 
 TEST_F(StudioTruth, OneEmptyOrFullSilhouetteIsTolerated) {
@@ -133,8 +153,8 @@ TEST_F(StudioTruth, WrongImageSizeNamesTheCamera) {
 TEST_F(StudioTruth, PhotoCarveRemovesAFloatingSlabAndKeepsTheActor) {
   // The hull of the true silhouettes at 20 mm plus a slab no silhouette has (hung 0.3 m in front
   // of the chest): the cameras that see the slab see different things through it, so space
-  // carving removes it. The actor's own box edges are photo-inconsistent too (two faces of
-  // different shading meet there), so each pass also erodes them (ave-bench studio): bounded here.
+  // carving removes it. The boxes actor's edges were photo-inconsistent too (two faces of
+  // different shading meet there), so each pass also eroded them (ave-bench studio): bounded here.
   HullOptions o = Options20mm().hull;
   o.max_background_votes = 0;
   absl::StatusOr<VoxelGrid> hull = CarveVisualHull(set_->cameras, set_->truth_silhouettes, o);
