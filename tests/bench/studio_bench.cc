@@ -6,6 +6,7 @@
 // data: flat single-level carving against the hierarchy (same working box), VTK's flying edges and
 // marching cubes against our marching cubes (same voxels), strict carving (no tolerance), and no
 // shadow removal. Writes a plot and a textured reconstruction rendered beside a camera image.
+// --actor boxes scores the simulator's boxes actor (same skeleton and walk) instead of the body.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -354,7 +355,7 @@ int RunStudio(const StudioBenchOptions& o) {
       }
       it->Add(row);
     }
-    // Where the ceiling's excess comes from: the union of each box's own hull (no limb hides
+    // Where the ceiling's excess comes from: the union of each part's own hull (no limb hides
     // another), and convex actors alone in the studio (a cylinder: tight; a box: wedges).
     {
       const auto t0 = ThreadCpuClock::now();
@@ -407,7 +408,7 @@ int RunStudio(const StudioBenchOptions& o) {
       }
     }
     // More views: 26 ring cameras (+ overhead) halve the angle between ring directions, so the
-    // boxes' wedges and the hidden gaps shrink; the whole chain and its ceiling at 10 mm.
+    // parts' own excess (a box's wedges) and the hidden gaps shrink; the chain and its ceiling at 10 mm.
     {
       absl::StatusOr<studio::testing::SimulatedFrameSet> more = studio::testing::SimulateStudioFrameSet(frame, 26, actor);
       if (!more.ok()) return std::cerr << "ave-bench studio: " << more.status().message() << "\n", 1;
