@@ -45,8 +45,8 @@ struct Segment {
   double hx, hy, length;
 };
 
-// Appends a closed part: triangles wound outward (counter-clockwise seen from outside), one
-// colour each, sharing no vertex with another part.
+// One triangle of a part, with its colour. Every part is closed, wound outward (counter-clockwise
+// seen from outside) and shares no vertex with another part.
 void AddTriangle(TriangleMesh& mesh, std::vector<Vector3f>& colors, uint32_t a, uint32_t b, uint32_t c, const Vector3f& color) {
   mesh.indices.insert(mesh.indices.end(), {a, b, c});
   mesh.triangle_material.push_back(SurfaceMaterial::kObject);
@@ -73,8 +73,8 @@ void AppendBox(TriangleMesh& mesh, std::vector<Vector3f>& colors, const Segment&
 // area is the box's cross-section, 4 hx hy; the head's is inscribed in its box instead) scaled by
 // a width profile r(z) = 1 + taper (z - z_mid) / L - round_depth (2 - g_top(z) - g_bottom(z)),
 // g a quarter-ellipse rising from 0 at the end to 1 at `*_round` metres from it (1 throughout
-// for a flat end). r is concave in z (a sum of concave terms), so every part is convex; the
-// ends are flat discs of width 1 -+ taper / 2 - round_depth. The part may reach past the joint
+// for a flat end). r is concave in z (a sum of concave terms), so every part is convex; a
+// rounded end is a flat disc of width 1 -+ taper / 2 - round_depth. The part may reach past the joint
 // (top_ext) and the segment's end (bottom_ext) so that neighbours overlap at knees, elbows,
 // hips and shoulders as a body does, instead of meeting at a pinched waist.
 struct PartShape {
