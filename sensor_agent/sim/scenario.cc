@@ -137,7 +137,7 @@ void ParseSensors(const Map& sensors, Scenario& s) {
   }
   if (sensors.Has("studio")) {
     const Map m(sensors.Get("studio"), sensors.Field("studio"));
-    m.AllowOnly({"cameras", "radius_m", "overhead", "fps", "duration_s", "width", "height"});
+    m.AllowOnly({"cameras", "radius_m", "overhead", "fps", "duration_s", "width", "height", "actor"});
     StudioSpec spec;
     spec.cameras = m.IntIn("cameras", spec.cameras, 1, 64);
     spec.radius_m = m.NumberIn("radius_m", spec.radius_m, 1.001, 50);
@@ -146,6 +146,10 @@ void ParseSensors(const Map& sensors, Scenario& s) {
     spec.duration_s = m.NumberIn("duration_s", spec.duration_s, 0, kUnbounded);
     spec.width = m.IntIn("width", spec.width, 16, 8192);
     spec.height = m.IntIn("height", spec.height, 16, 8192);
+    const std::string actor = m.StringOr("actor", StudioActorName(spec.actor));
+    const std::optional<StudioActor> kind = ParseStudioActor(actor);
+    if (!kind) Fail(m.Get("actor"), m.Field("actor"), "must be body or boxes, not '" + actor + "'");
+    spec.actor = *kind;
     s.studio = spec;
   }
 }

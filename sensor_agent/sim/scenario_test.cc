@@ -49,6 +49,7 @@ TEST(Scenario, BundledScenariosLoadWithTheirSensorsAndEffects) {
   ASSERT_TRUE(studio->studio.has_value());
   EXPECT_EQ(studio->studio->cameras, 13);
   EXPECT_TRUE(studio->studio->overhead);
+  EXPECT_EQ(studio->studio->actor, StudioActor::kBody);  // a person's body unless `actor: boxes`
 
   auto minimal = LoadScenario("minimal");
   ASSERT_TRUE(minimal.ok()) << minimal.status();
@@ -88,6 +89,7 @@ sensors:
   EXPECT_EQ(Rejection("name: t\nsensors:\n  rotating_lidar:\n    - {id: l, position: [0, 0], rate_hz: -10}\n"),
             "bad.yaml:4: sensors.rotating_lidar[0].rate_hz: must be > 0");
   EXPECT_EQ(Rejection("name: t\nsensors:\n  studio: {fps: 0}\n"), "bad.yaml:3: sensors.studio.fps: must be > 0");
+  EXPECT_EQ(Rejection("name: t\nsensors:\n  studio: {actor: robot}\n"), "bad.yaml:3: sensors.studio.actor: must be body or boxes, not 'robot'");
 }
 
 TEST(ScenarioBadInput, SensorMistakesNameTheirField) {

@@ -37,33 +37,110 @@ const Vector3f kShirt(0.20f, 0.45f, 0.80f), kTrousers(0.25f, 0.22f, 0.30f), kSki
 Matrix3d RotZ(double a) { return Eigen::AngleAxisd(a, Vector3d::UnitZ()).toRotationMatrix(); }
 Matrix3d RotY(double a) { return Eigen::AngleAxisd(a, Vector3d::UnitY()).toRotationMatrix(); }
 
-// A box hanging from a joint: the box spans [-hx, hx] x [-hy, hy] x [-length, 0] in the joint
-// frame (world_from_joint = R, joint), i.e. a limb segment pointing down its frame's -z.
-void AppendSegment(TriangleMesh& mesh, std::vector<Vector3f>& colors, const Matrix3d& R, const Vector3d& joint, double hx, double hy,
-                   double length, const Vector3f& color) {
+// A segment hangs from a joint: it spans [-hx, hx] x [-hy, hy] x [-length, 0] in the joint frame
+// (world_from_joint = R, joint), i.e. a limb segment pointing down its frame's -z.
+struct Segment {
+  Matrix3d R;
+  Vector3d joint;
+  double hx, hy, length;
+};
+
+// One triangle of a part, with its colour. Every part is closed, wound outward (counter-clockwise
+// seen from outside) and shares no vertex with another part.
+void AddTriangle(TriangleMesh& mesh, std::vector<Vector3f>& colors, uint32_t a, uint32_t b, uint32_t c, const Vector3f& color) {
+  mesh.indices.insert(mesh.indices.end(), {a, b, c});
+  mesh.triangle_material.push_back(SurfaceMaterial::kObject);
+  mesh.triangle_object.push_back(-1);
+  colors.push_back(color);
+}
+
+// The segment's box (StudioActor::kBoxes).
+void AppendBox(TriangleMesh& mesh, std::vector<Vector3f>& colors, const Segment& g, const Vector3f& color) {
   const uint32_t first = static_cast<uint32_t>(mesh.positions.size());
   for (int k = 0; k < 8; ++k) {
-    const Vector3d local(k & 1 ? hx : -hx, k & 2 ? hy : -hy, k & 4 ? 0.0 : -length);
-    mesh.positions.push_back((joint + R * local).cast<float>());
+    const Vector3d local(k & 1 ? g.hx : -g.hx, k & 2 ? g.hy : -g.hy, k & 4 ? 0.0 : -g.length);
+    mesh.positions.push_back((g.joint + g.R * local).cast<float>());
   }
-  // Faces outward (counter-clockwise seen from outside).
   const uint32_t q[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
   for (const auto& f : q) {
-    mesh.indices.insert(mesh.indices.end(), {first + f[0], first + f[1], first + f[2], first + f[0], first + f[2], first + f[3]});
-    for (int t = 0; t < 2; ++t) {
-      mesh.triangle_material.push_back(SurfaceMaterial::kObject);
-      mesh.triangle_object.push_back(-1);
-      colors.push_back(color);
-    }
+    AddTriangle(mesh, colors, first + f[0], first + f[1], first + f[2], color);
+    AddTriangle(mesh, colors, first + f[0], first + f[2], first + f[3], color);
   }
 }
 
-TriangleMesh ActorMesh(double t_s, std::vector<Vector3f>* triangle_colors) {
+// How a segment becomes a body part (StudioActor::kBody): along the segment's axis a stack of
+// rings, each the same elliptic kBodySides-gon (semi-axes hx, hy scaled so that the polygon's
+// area is the box's cross-section, 4 hx hy; the head's is inscribed in its box instead) scaled by
+// a width profile r(z) = 1 + taper (z - z_mid) / L - round_depth (2 - g_top(z) - g_bottom(z)),
+// g a quarter-ellipse rising from 0 at the end to 1 at `*_round` metres from it (1 throughout
+// for a flat end). r is concave in z (a sum of concave terms), so every part is convex; a
+// rounded end is a flat disc of width 1 -+ taper / 2 - round_depth. The part may reach past the joint
+// (top_ext) and the segment's end (bottom_ext) so that neighbours overlap at knees, elbows,
+// hips and shoulders as a body does, instead of meeting at a pinched waist.
+struct PartShape {
+  double top_ext = 0, bottom_ext = 0;      // m beyond the segment's ends
+  double top_round = 0, bottom_round = 0;  // axial length of each rounded end, m; 0: a flat end
+  double round_depth = 0.8;                // how much narrower the end discs are, in [0, 1)
+  double taper = 0;                        // top width minus bottom width (the mean width is 1)
+  bool keep_area = true;                   // false: the ellipse inscribed in the box (the head)
+};
+constexpr int kBodySides = 20;
+constexpr int kCapRings = 4;  // rings on each rounded end after its disc
+
+void AppendBodyPart(TriangleMesh& mesh, std::vector<Vector3f>& colors, const Segment& g, const PartShape& p, const Vector3f& color) {
+  const double z_top = p.top_ext, z_bottom = -g.length - p.bottom_ext, span = z_top - z_bottom;
+  // Ring heights, bottom to top: each rounded end's rings at cos-spaced depths, then the other's.
+  std::vector<double> z;
+  for (int j = 0; j <= (p.bottom_round > 0 ? kCapRings : 0); ++j) z.push_back(z_bottom + p.bottom_round * (1 - std::cos(j * kPi / (2 * kCapRings))));
+  for (int j = p.top_round > 0 ? kCapRings : 0; j >= 0; --j) {
+    const double zj = z_top - p.top_round * (1 - std::cos(j * kPi / (2 * kCapRings)));
+    if (zj > z.back() + 1e-9) z.push_back(zj);  // the head's two ends meet at its middle ring
+  }
+  auto rise = [](double d, double k) { return k <= 0 || d >= k ? 1.0 : std::sqrt(std::max(0.0, 1 - (1 - d / k) * (1 - d / k))); };
+  const double n = kBodySides;
+  const double polygon_area_per_ab = n / 2 * std::sin(2 * kPi / n);  // of a unit-semi-axes N-gon
+  const double scale = p.keep_area ? std::sqrt(4 / polygon_area_per_ab) : 1.0;
+  const uint32_t first = static_cast<uint32_t>(mesh.positions.size());
+  for (const double zj : z) {
+    const double r = 1 + p.taper * ((zj - z_bottom) / span - 0.5) -
+                     p.round_depth * (2 - rise(z_top - zj, p.top_round) - rise(zj - z_bottom, p.bottom_round));
+    for (int i = 0; i < kBodySides; ++i) {
+      const double phi = 2 * kPi * (i + 0.5) / n;
+      const Vector3d local(scale * g.hx * r * std::cos(phi), scale * g.hy * r * std::sin(phi), zj);
+      mesh.positions.push_back((g.joint + g.R * local).cast<float>());
+    }
+  }
+  const uint32_t rings = static_cast<uint32_t>(z.size()), sides = kBodySides;
+  auto v = [&](uint32_t ring, uint32_t i) { return first + ring * sides + i % sides; };
+  for (uint32_t j = 0; j + 1 < rings; ++j) {
+    for (uint32_t i = 0; i < sides; ++i) {  // i runs counter-clockwise seen from +z
+      AddTriangle(mesh, colors, v(j, i), v(j, i + 1), v(j + 1, i + 1), color);
+      AddTriangle(mesh, colors, v(j, i), v(j + 1, i + 1), v(j + 1, i), color);
+    }
+  }
+  for (uint32_t i = 1; i + 1 < sides; ++i) {
+    AddTriangle(mesh, colors, v(rings - 1, 0), v(rings - 1, i), v(rings - 1, i + 1), color);  // top disc, facing +z
+    AddTriangle(mesh, colors, v(0, 0), v(0, i + 1), v(0, i), color);                          // bottom disc, facing -z
+  }
+}
+
+TriangleMesh ActorMesh(double t_s, StudioActor actor, std::vector<Vector3f>* triangle_colors) {
   std::vector<Vector3f> local_colors;
   std::vector<Vector3f>& colors = triangle_colors ? *triangle_colors : local_colors;
   colors.clear();
   const StudioActorState s = StudioActorAt(t_s);
   TriangleMesh mesh;
+  auto part = [&](const Matrix3d& R, const Vector3d& joint, double hx, double hy, double length, const Vector3f& color, const PartShape& shape) {
+    const Segment g{R, joint, hx, hy, length};
+    if (actor == StudioActor::kBoxes) AppendBox(mesh, colors, g, color);
+    else AppendBodyPart(mesh, colors, g, shape, color);
+  };
+  // Body part shapes: {top_ext, bottom_ext, top_round, bottom_round, round_depth, taper, keep_area}.
+  const PartShape thigh_shape{0.03, 0.03, 0.06, 0.05, 0.8, 0.25, true}, shin_shape{0.02, 0.02, 0.05, 0.04, 0.8, 0.25, true};
+  const PartShape shoe_shape{0, 0, 0.035, 0, 0.6, 0, true};  // flat sole
+  const PartShape upper_arm_shape{0.03, 0.02, 0.05, 0.04, 0.8, 0.15, true}, forearm_shape{0.02, 0, 0.035, 0.05, 0.8, 0.2, true};
+  const PartShape torso_shape{0, 0, 0.09, 0.06, 0.7, 0.12, true}, neck_shape{0.02, 0.02, 0.015, 0.015, 0.3, 0, true};
+  const PartShape head_shape{0, 0, 0.12, 0.12, 0.85, 0, false};  // an ellipsoid-like solid filling its box
   const Matrix3d body = RotZ(s.heading_rad);  // body frame: x forward, y left, z up
   const double swing = std::sin(s.phase_rad);
   const double pelvis_z = 0.92 + 0.02 * std::cos(2 * s.phase_rad);
@@ -74,23 +151,23 @@ TriangleMesh ActorMesh(double t_s, std::vector<Vector3f>* triangle_colors) {
     const double knee = 0.7 * std::max(0.0, std::sin(s.phase_rad + (side > 0 ? 0.6 : kPi + 0.6)));
     const Matrix3d thigh = body * RotY(hip);
     const Vector3d hip_joint = pelvis + body * Vector3d(0, 0.1 * side, 0);
-    AppendSegment(mesh, colors, thigh, hip_joint, 0.075, 0.07, 0.44, kTrousers);
+    part(thigh, hip_joint, 0.075, 0.07, 0.44, kTrousers, thigh_shape);
     const Matrix3d shin = thigh * RotY(knee);
     const Vector3d knee_joint = hip_joint + thigh * Vector3d(0, 0, -0.44);
-    AppendSegment(mesh, colors, shin, knee_joint, 0.06, 0.06, 0.42, kTrousers);
+    part(shin, knee_joint, 0.06, 0.06, 0.42, kTrousers, shin_shape);
     const Vector3d ankle = knee_joint + shin * Vector3d(0, 0, -0.42);
-    AppendSegment(mesh, colors, body, ankle + body * Vector3d(0.06, 0, 0.05), 0.12, 0.055, 0.07, kShoes);
+    part(body, ankle + body * Vector3d(0.06, 0, 0.05), 0.12, 0.055, 0.07, kShoes, shoe_shape);
     // Arms swing against the legs; elbows bend a little.
     const double shoulder = 0.35 * side * swing;
     const Matrix3d upper = body * RotY(shoulder);
     const Vector3d shoulder_joint = pelvis + body * Vector3d(0, 0.23 * side, 0.5);
-    AppendSegment(mesh, colors, upper, shoulder_joint, 0.05, 0.045, 0.29, kShirt);
+    part(upper, shoulder_joint, 0.05, 0.045, 0.29, kShirt, upper_arm_shape);
     const Matrix3d fore = upper * RotY(-0.25 - 0.2 * std::max(0.0, side * swing));
-    AppendSegment(mesh, colors, fore, shoulder_joint + upper * Vector3d(0, 0, -0.29), 0.04, 0.04, 0.27, kSkin);
+    part(fore, shoulder_joint + upper * Vector3d(0, 0, -0.29), 0.04, 0.04, 0.27, kSkin, forearm_shape);
   }
-  AppendSegment(mesh, colors, body, pelvis + Vector3d(0, 0, 0.56), 0.11, 0.18, 0.58, kShirt);      // torso
-  AppendSegment(mesh, colors, body, pelvis + Vector3d(0, 0, 0.63), 0.04, 0.04, 0.08, kSkin);       // neck
-  AppendSegment(mesh, colors, body, pelvis + Vector3d(0, 0, 0.87), 0.1, 0.085, 0.24, kSkin);       // head
+  part(body, pelvis + Vector3d(0, 0, 0.56), 0.11, 0.18, 0.58, kShirt, torso_shape);  // torso
+  part(body, pelvis + Vector3d(0, 0, 0.63), 0.04, 0.04, 0.08, kSkin, neck_shape);    // neck
+  part(body, pelvis + Vector3d(0, 0, 0.87), 0.1, 0.085, 0.24, kSkin, head_shape);    // head
   mesh.normals.assign(mesh.positions.size(), Vector3f::UnitZ());
   mesh.colors.assign(mesh.positions.size(), kShirt);
   return mesh;
@@ -135,7 +212,15 @@ StudioActorState StudioActorAt(double t_s) {
 
 Vector3d StudioLightDirection() { return Vector3d(0.55, -0.35, 1.0).normalized(); }
 
-TriangleMesh StudioActorMesh(double t_s) { return ActorMesh(t_s, nullptr); }
+TriangleMesh StudioActorMesh(double t_s, StudioActor actor) { return ActorMesh(t_s, actor, nullptr); }
+
+const char* StudioActorName(StudioActor actor) { return actor == StudioActor::kBoxes ? "boxes" : "body"; }
+
+std::optional<StudioActor> ParseStudioActor(std::string_view name) {
+  if (name == "body") return StudioActor::kBody;
+  if (name == "boxes") return StudioActor::kBoxes;
+  return std::nullopt;
+}
 
 std::vector<StudioCamera> StudioCameras(const StudioSpec& spec) {
   std::vector<StudioCamera> cams;
@@ -159,7 +244,7 @@ std::vector<StudioCamera> StudioCameras(const StudioSpec& spec) {
 namespace {
 
 StudioView RenderView(const StudioCamera& camera, const EffectSet& effects, uint64_t seed, int64_t frame_index, double t_s,
-                      bool with_actor) {
+                      bool with_actor, StudioActor actor_kind) {
   StudioView view;
   const PinholeIntrinsics& k = camera.intrinsics;
   if (!k.Check().empty() || !std::isfinite(t_s)) return view;
@@ -171,7 +256,7 @@ StudioView RenderView(const StudioCamera& camera, const EffectSet& effects, uint
   view.shadow.assign(static_cast<size_t>(w) * h, 0);
 
   std::vector<Vector3f> colors;
-  const TriangleMesh actor = ActorMesh(t_s, &colors);
+  const TriangleMesh actor = ActorMesh(t_s, actor_kind, &colors);
   const MeshBvh actor_bvh(actor);
   const Rigid3d camera_from_world = camera.world_from_camera.Inverse();
   const Vector3d eye = camera.world_from_camera.translation;
@@ -280,13 +365,14 @@ StudioView RenderView(const StudioCamera& camera, const EffectSet& effects, uint
 
 }  // namespace
 
-StudioView RenderStudioView(const StudioCamera& camera, const EffectSet& effects, uint64_t seed, int64_t frame_index, double t_s) {
-  return RenderView(camera, effects, seed, frame_index, t_s, /*with_actor=*/true);
+StudioView RenderStudioView(const StudioCamera& camera, const EffectSet& effects, uint64_t seed, int64_t frame_index, double t_s,
+                            StudioActor actor) {
+  return RenderView(camera, effects, seed, frame_index, t_s, /*with_actor=*/true, actor);
 }
 
 StudioView RenderStudioBackground(const StudioCamera& camera, const EffectSet& effects, uint64_t seed) {
   // Frame index -1: its own noise draw, not a copy of any frame's.
-  return RenderView(camera, effects, seed, -1, 0.0, /*with_actor=*/false);
+  return RenderView(camera, effects, seed, -1, 0.0, /*with_actor=*/false, StudioActor::kBody);
 }
 
 absl::Status SimulateStudio(const StudioSpec& spec, const EffectSet& effects, uint64_t seed, const std::string& out_dir) {
@@ -335,7 +421,7 @@ absl::Status SimulateStudio(const StudioSpec& spec, const EffectSet& effects, ui
       return absl::InternalError("cannot write " + dir + "/background.png");
     }
     for (int f = 0; f < frames; ++f) {
-      StudioView view = RenderStudioView(cam, effects, seed, f, f / spec.fps);
+      StudioView view = RenderStudioView(cam, effects, seed, f, f / spec.fps, spec.actor);
       char name[32];
       std::snprintf(name, sizeof(name), "%04d.png", f);
       const cv::Mat image(view.height, view.width, CV_8UC3, view.bgr.data());

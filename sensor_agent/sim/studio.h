@@ -2,13 +2,18 @@
 // Simulated multi-camera 4D studio (i4D §4: 13 calibrated cameras on a ring around one actor,
 // plus an optional overhead view): a walking articulated figure (torso, head, two-segment arms
 // and legs swinging with a walk cycle, walking on a small circle) rendered by a CPU rasteriser,
-// with a silhouette mask per image. The image also shows the actor's floor shadow from a key
-// light; the shadow is NOT in the silhouette, so shadow removal has something to remove.
+// with a silhouette mask per image. The figure's parts are rounded closed convex solids (a
+// person's body, the default) or axis-aligned boxes on the same skeleton (StudioActor::kBoxes:
+// the visual hull's hard case, flat faces between the ring's views). The image also shows the
+// actor's floor shadow from a key light; the shadow is NOT in the silhouette, so shadow removal
+// has something to remove.
 //
 // Frames: studio world is metric, z up, floor at z = 0, actor walking around the origin. Cameras
 // follow OpenCV (camera.h); poses are world_from_camera. Files: docs/SIMULATOR_FORMATS.md.
 #include <cstdint>
+#include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
@@ -21,6 +26,13 @@
 
 namespace ave::sim {
 
+// The actor's body on the one skeleton and walk: kBody, each part (torso, neck, head, upper and
+// lower arms and legs, shoes) a closed convex solid with an elliptic 20-gon cross-section, rounded
+// ends and limbs tapering a little; kBoxes, each part a box (the earlier actor).
+enum class StudioActor { kBody, kBoxes };
+const char* StudioActorName(StudioActor actor);                 // "body", "boxes"
+std::optional<StudioActor> ParseStudioActor(std::string_view name);  // nullopt for any other name
+
 struct StudioSpec {
   int cameras = 13;       // on the ring, [1, 64]
   double radius_m = 4;    // ring radius, (1, 50]
@@ -28,6 +40,7 @@ struct StudioSpec {
   double fps = 10;        // (0, 120]
   double duration_s = 2;  // >= 0; floor(duration_s * fps) frames, at least one
   int width = 640, height = 480;
+  StudioActor actor = StudioActor::kBody;
   // Empty when usable; otherwise names the first bad field.
   std::string Check() const;
 };
@@ -41,8 +54,9 @@ struct StudioCamera {
 // The studio's calibrated cameras (ring first, then the overhead one).
 std::vector<StudioCamera> StudioCameras(const StudioSpec& spec);
 
-// The actor at t_s as a closed triangle mesh in studio world coordinates (origin zero).
-TriangleMesh StudioActorMesh(double t_s);
+// The actor at t_s as a triangle mesh in studio world coordinates (origin zero): one closed,
+// convex, outward-wound part after another (parts share no vertex; they overlap at the joints).
+TriangleMesh StudioActorMesh(double t_s, StudioActor actor = StudioActor::kBody);
 
 struct StudioView {
   int width = 0, height = 0;
@@ -65,7 +79,8 @@ Eigen::Vector3d StudioLightDirection();
 
 // One camera's view at t_s: the render, then illumination and camera_noise when named (the
 // camera pipeline's effect functions, camera_effects.h; frame_index seeds them). Deterministic.
-StudioView RenderStudioView(const StudioCamera& camera, const EffectSet& effects, uint64_t seed, int64_t frame_index, double t_s);
+StudioView RenderStudioView(const StudioCamera& camera, const EffectSet& effects, uint64_t seed, int64_t frame_index, double t_s,
+                            StudioActor actor = StudioActor::kBody);
 
 // The empty studio seen by one camera (the background plate a real studio records before the
 // actor walks in): the same render and effects, no actor and no shadow.
@@ -73,7 +88,7 @@ StudioView RenderStudioBackground(const StudioCamera& camera, const EffectSet& e
 
 // Writes calibration.json, per camera <camera>/background.png (RenderStudioBackground) and, per
 // camera and frame, <camera>/image_NNNN.png and
-// <camera>/mask_NNNN.png into `out_dir`. Nothing is written when the spec is unusable.
+// <camera>/mask_NNNN.png into `out_dir`, of spec.actor. Nothing is written when the spec is unusable.
 absl::Status SimulateStudio(const StudioSpec& spec, const EffectSet& effects, uint64_t seed, const std::string& out_dir);
 
 }  // namespace ave::sim

@@ -60,6 +60,40 @@ TEST(Studio, ActorWalksWithSwingingLimbs) {
   EXPECT_NEAR(hi.z(), 1.8, 0.1);     // a person's height
 }
 
+// The body (default) and the boxes share the skeleton and the walk: over a whole cycle both stand
+// on the floor at a person's height, and the body's rounded parts hold about the boxes' volume
+// (cross-sections of the boxes' area, rounded ends, limbs reaching a little past their joints).
+TEST(Studio, BodyAndBoxesShareTheSkeletonAndTheWalk) {
+  auto volume = [](const TriangleMesh& m) {
+    double v = 0;
+    for (size_t t = 0; t < m.TriangleCount(); ++t) {
+      v += m.positions[m.indices[3 * t]].cast<double>().dot(
+               m.positions[m.indices[3 * t + 1]].cast<double>().cross(m.positions[m.indices[3 * t + 2]].cast<double>())) / 6;
+    }
+    return v;
+  };
+  for (double t_s = 0; t_s < 1.2; t_s += 0.1) {
+    const TriangleMesh body = StudioActorMesh(t_s), boxes = StudioActorMesh(t_s, StudioActor::kBoxes);
+    EXPECT_EQ(boxes.TriangleCount(), 13u * 12u);
+    EXPECT_GT(body.TriangleCount(), 13u * 20u * 4u);  // 20-sided rings, rounded ends
+    Eigen::Vector3f lo[2], hi[2];
+    for (int k = 0; k < 2; ++k) {
+      lo[k] = Eigen::Vector3f::Constant(1e9), hi[k] = -lo[k];
+      for (const auto& p : (k ? boxes : body).positions) lo[k] = lo[k].cwiseMin(p), hi[k] = hi[k].cwiseMax(p);
+      EXPECT_GT(lo[k].z(), 0.005) << k << " at " << t_s << " s";  // shoes on the floor, nothing through it
+      EXPECT_LT(lo[k].z(), 0.1) << k << " at " << t_s << " s";
+      EXPECT_NEAR(hi[k].z(), 1.8, 0.1) << k << " at " << t_s << " s";
+    }
+    EXPECT_LT((lo[0] - lo[1]).norm() + (hi[0] - hi[1]).norm(), 0.15) << t_s;  // the same figure's extent
+    const double ratio = volume(body) / volume(boxes);  // sums over parts: overlaps counted twice in both
+    EXPECT_GT(ratio, 0.8) << t_s;
+    EXPECT_LT(ratio, 1.1) << t_s;
+  }
+  EXPECT_STREQ(StudioActorName(StudioActor::kBoxes), "boxes");
+  EXPECT_EQ(ParseStudioActor("body"), StudioActor::kBody);
+  EXPECT_FALSE(ParseStudioActor("Body").has_value());
+}
+
 // Every pixel centre whose ray hits the actor is in the silhouette, and no other pixel is.
 TEST(Studio, SilhouettesAreTheActorsProjectionAndTheShadowIsOutsideThem) {
   StudioSpec spec;

@@ -6,11 +6,13 @@
 // data: flat single-level carving against the hierarchy (same working box), VTK's flying edges and
 // marching cubes against our marching cubes (same voxels), strict carving (no tolerance), and no
 // shadow removal. Writes a plot and a textured reconstruction rendered beside a camera image.
+// --actor boxes scores the simulator's boxes actor (same skeleton and walk) instead of the body.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -37,6 +39,7 @@ struct StudioBenchOptions {
   std::string png = "studio_bench.png";
   std::string render_png = "studio_render.png";
   std::string slice_png = "studio_hull_slices.png";
+  std::string actor = "body";  // the simulated actor: body (default) or boxes (the hull's hard case)
 };
 
 double CpuMs(ThreadCpuClock::time_point t0) { return std::chrono::duration<double, std::milli>(ThreadCpuClock::now() - t0).count(); }
@@ -165,9 +168,9 @@ studio::VoxelGrid UnionOf(const std::vector<studio::VoxelGrid>& grids) {
   return out;
 }
 
-// The hull of each closed part of the actor (its boxes) carved alone from that part's own true
-// silhouettes, strictly, and their union: what the visual hull gives when no limb hides another,
-// so what is left is each box's own wedges between the views.
+// The hull of each closed part of the actor (its body parts or boxes) carved alone from that
+// part's own true silhouettes, strictly, and their union: what the visual hull gives when no limb
+// hides another, so what is left is each part's own excess between the views (a box's wedges).
 studio::VoxelGrid HullOfEachPart(const studio::testing::SimulatedFrameSet& set, double voxel_m) {
   std::vector<studio::VoxelGrid> hulls;
   for (const TriangleMesh& part : studio::testing::MeshParts(set.truth_mesh)) {
@@ -226,13 +229,15 @@ void SlicePng(const std::vector<std::pair<std::string, const studio::VoxelGrid*>
 }
 
 int RunStudio(const StudioBenchOptions& o) {
+  const std::optional<sim::StudioActor> actor = sim::ParseStudioActor(o.actor);
+  if (!actor) return std::cerr << "ave-bench studio: --actor must be body or boxes, not '" << o.actor << "'\n", 1;
   UseOneCore();
   std::vector<Row> rows;
   double sil_iou_removed = 0, sil_iou_kept = 0, sil_ms_removed = 0, sil_ms_kept = 0;
   int sil_n = 0;
   bool rendered = false;
   for (int frame : o.frames) {
-    absl::StatusOr<studio::testing::SimulatedFrameSet> set = studio::testing::SimulateStudioFrameSet(frame);
+    absl::StatusOr<studio::testing::SimulatedFrameSet> set = studio::testing::SimulateStudioFrameSet(frame, 0, actor);
     if (!set.ok()) {
       std::cerr << "ave-bench studio: " << set.status().message() << "\n";
       return 1;
@@ -350,13 +355,13 @@ int RunStudio(const StudioBenchOptions& o) {
       }
       it->Add(row);
     }
-    // Where the ceiling's excess comes from: the union of each box's own hull (no limb hides
+    // Where the ceiling's excess comes from: the union of each part's own hull (no limb hides
     // another), and convex actors alone in the studio (a cylinder: tight; a box: wedges).
     {
       const auto t0 = ThreadCpuClock::now();
       const studio::VoxelGrid parts = HullOfEachPart(*set, 0.01);
       Row row;
-      row.name = "union of each box's own hull (true box silhouettes, K=0)";
+      row.name = "union of each part's own hull (true part silhouettes, K=0)";
       row.voxel_mm = 10;
       row.volume_iou = studio::testing::HullVolumeIoU(parts, set->truth_mesh);
       row.hull_ms = row.ms = CpuMs(t0);
@@ -377,7 +382,7 @@ int RunStudio(const StudioBenchOptions& o) {
         for (const Eigen::Vector3f& p : set->truth_mesh.positions) centre += p.head<2>().cast<double>() / set->truth_mesh.positions.size();
         SlicePng({{"ave-studio, 10 mm (default)", &ours->hull},
                   {"hull of the true silhouettes", &ceiling->hull},
-                  {"union of each box's own hull", &parts}},
+                  {"union of each part's own hull", &parts}},
                  set->truth_mesh, centre, o.slice_png);
       }
       for (const auto& [name, mesh] : {std::pair<std::string, TriangleMesh>{"convex: cylinder r 0.17 m alone (true silhouettes, K=0)",
@@ -403,9 +408,9 @@ int RunStudio(const StudioBenchOptions& o) {
       }
     }
     // More views: 26 ring cameras (+ overhead) halve the angle between ring directions, so the
-    // boxes' wedges and the hidden gaps shrink; the whole chain and its ceiling at 10 mm.
+    // parts' own excess (a box's wedges) and the hidden gaps shrink; the chain and its ceiling at 10 mm.
     {
-      absl::StatusOr<studio::testing::SimulatedFrameSet> more = studio::testing::SimulateStudioFrameSet(frame, 26);
+      absl::StatusOr<studio::testing::SimulatedFrameSet> more = studio::testing::SimulateStudioFrameSet(frame, 26, actor);
       if (!more.ok()) return std::cerr << "ave-bench studio: " << more.status().message() << "\n", 1;
       for (bool truth_masks : {false, true}) {
         ReconstructOptions ro;
@@ -441,7 +446,8 @@ int RunStudio(const StudioBenchOptions& o) {
   }
   for (Row& r : rows) r = r.Mean();
   sil_iou_removed /= sil_n, sil_iou_kept /= sil_n, sil_ms_removed /= sil_n, sil_ms_kept /= sil_n;
-  std::printf("ave-bench studio: %zu frame sets of the studio scenario (14 views, 640x480), means; CPU ms on one core\n", o.frames.size());
+  std::printf("ave-bench studio: %zu frame sets of the studio scenario (14 views, 640x480), actor %s, means; CPU ms on one core\n", o.frames.size(),
+              sim::StudioActorName(*actor));
   std::printf("\nsilhouette IoU vs the simulator's masks: shadow removal %.4f (%.1f ms / 14 views), without %.4f (%.1f ms)\n", sil_iou_removed,
               sil_ms_removed, sil_iou_kept, sil_ms_kept);
   std::printf("\n| method | voxel mm | volume IoU | Chamfer mm | texture err (levels) | ms / frame set | segment / hull / surface / texture ms | "
@@ -485,6 +491,9 @@ Runner AddStudioBench(CLI::App& sub) {
       ->check(ave::cli::Range(0, 1000));
   sub.add_option("--voxel-mm", options->voxel_mm, "voxel sizes in mm, comma-separated")->delimiter(',')->capture_default_str()->check(ave::cli::Range(2, 200));
   sub.add_option("--png", options->png, "plot to write")->capture_default_str();
+  sub.add_option("--actor", options->actor, "the simulated actor: body (rounded parts) or boxes (the same skeleton as boxes)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"body", "boxes"}));
   sub.add_option("--slice-png", options->slice_png, "horizontal slices of the hulls against the true actor (first frame, 10 mm)")->capture_default_str();
   sub.add_option("--render-png", options->render_png, "a camera image beside the textured reconstruction rendered from it")->capture_default_str();
   return [options] { return RunStudio(*options); };

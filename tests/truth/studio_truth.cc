@@ -148,19 +148,21 @@ Image ToImage(const sim::StudioView& v) { return Image{v.width, v.height, v.bgr}
 
 }  // namespace
 
-absl::StatusOr<SimulatedFrameSet> SimulateStudioFrameSet(int frame, int cameras) {
+absl::StatusOr<SimulatedFrameSet> SimulateStudioFrameSet(int frame, int cameras, std::optional<sim::StudioActor> actor) {
   absl::StatusOr<sim::Scenario> scenario = sim::LoadScenario("studio");
   if (!scenario.ok()) return scenario.status();
   if (!scenario->studio) return absl::InternalError("the studio scenario names no studio sensor");
   sim::StudioSpec spec = *scenario->studio;
   if (cameras > 0) spec.cameras = cameras;
+  if (actor) spec.actor = *actor;
   SimulatedFrameSet set;
   set.t_s = frame / spec.fps;
-  set.truth_mesh = sim::StudioActorMesh(set.t_s);
+  set.actor = spec.actor;
+  set.truth_mesh = sim::StudioActorMesh(set.t_s, spec.actor);
   for (const sim::StudioCamera& cam : sim::StudioCameras(spec)) {
     const sim::EffectSet effects = scenario->EffectsForCamera(cam.id);
     set.cameras.push_back({cam.id, cam.intrinsics, cam.world_from_camera});
-    const sim::StudioView view = sim::RenderStudioView(cam, effects, scenario->seed, frame, set.t_s);
+    const sim::StudioView view = sim::RenderStudioView(cam, effects, scenario->seed, frame, set.t_s, spec.actor);
     set.images.push_back(ToImage(view));
     set.truth_silhouettes.push_back(Mask{view.width, view.height, view.silhouette});
     set.backgrounds.push_back(ToImage(sim::RenderStudioBackground(cam, effects, scenario->seed)));
@@ -317,7 +319,7 @@ double ChamferMm(const SurfaceMesh& mesh, const TriangleMesh& truth, int samples
   std::mt19937_64 rng(7);
   std::vector<Vector3d> truth_normals;
   std::vector<Vector3d> truth_pts = SampleSurface(truth_tris, samples, rng, &truth_normals);
-  // Drop samples on faces buried inside another limb box: 2 mm outside them is still inside.
+  // Drop samples on faces buried inside another limb part: 2 mm outside them is still inside.
   std::vector<Vector3d> outer;
   for (size_t i = 0; i < truth_pts.size(); ++i) {
     if (Winding(truth_tris, truth_pts[i] + 0.002 * truth_normals[i]) == 0) outer.push_back(truth_pts[i]);

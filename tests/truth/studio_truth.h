@@ -3,6 +3,7 @@
 // of what the studio reconstructs against the simulator's truth (the actor's true mesh and
 // silhouettes). Tests and benches only: it links the simulator.
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -10,6 +11,7 @@
 #include "model_store/geometry/mesh.h"
 #include "model_store/studio/studio_types.h"
 #include "model_store/studio/visual_hull.h"
+#include "sensor_agent/sim/studio.h"
 
 namespace ave::studio::testing {
 
@@ -19,12 +21,13 @@ struct SimulatedFrameSet {
   std::vector<Image> images;            // the camera images (shadow in them)
   std::vector<Image> backgrounds;       // each camera's empty-studio plate
   std::vector<Mask> truth_silhouettes;  // the simulator's masks (no shadow)
-  TriangleMesh truth_mesh;              // StudioActorMesh(t_s), studio world
+  TriangleMesh truth_mesh;              // StudioActorMesh(t_s, actor), studio world
+  sim::StudioActor actor = sim::StudioActor::kBody;
 };
 
 // Frame `frame` of the bundled "studio" scenario (its spec, effects and seed). `cameras` > 0
-// overrides the ring's camera count (the overhead camera stays).
-absl::StatusOr<SimulatedFrameSet> SimulateStudioFrameSet(int frame, int cameras = 0);
+// overrides the ring's camera count (the overhead camera stays); `actor` the scenario's actor.
+absl::StatusOr<SimulatedFrameSet> SimulateStudioFrameSet(int frame, int cameras = 0, std::optional<sim::StudioActor> actor = std::nullopt);
 
 // Occupancy IoU of the hull against the true mesh voxelised on the same voxel lattice (a voxel
 // is inside the truth when its centre is inside at least one of the mesh's closed parts, each by
@@ -43,12 +46,12 @@ Mask RenderSilhouette(const StudioCameraModel& camera, const TriangleMesh& mesh)
 // at `centre`, corners at `radius_m`, the first at `yaw_rad`: a convex actor.
 TriangleMesh UprightPrism(const Eigen::Vector2d& centre, double radius_m, double height_m, int sides, double yaw_rad);
 
-// The closed parts of a mesh (triangles sharing vertices): the actor's boxes.
+// The closed parts of a mesh (triangles sharing vertices): the actor's body parts or boxes.
 std::vector<TriangleMesh> MeshParts(const TriangleMesh& mesh);
 
 // Symmetric Chamfer distance in millimetres: the mean over both directions of the mean distance
 // from area-uniform surface samples of one surface to the other (the truth's faces inside
-// another limb box are not its surface and are left out).
+// another limb part are not its surface and are left out).
 double ChamferMm(const SurfaceMesh& mesh, const TriangleMesh& truth, int samples = 20000);
 
 }  // namespace ave::studio::testing
