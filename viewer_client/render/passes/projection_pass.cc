@@ -104,7 +104,9 @@ absl::Status ProjectionPass::Resize(int width, int height, GLuint depth_stencil)
   live_ = MakeTexture2D(GL_RGBA32F, GL_RGBA, GL_FLOAT, width, height);
   retained_ = MakeTexture2D(GL_RGBA32F, GL_RGBA, GL_FLOAT, width, height);
   fade_ = MakeTexture2D(GL_R32F, GL_RED, GL_FLOAT, width, height);
-  // Depth and stencil tests stay off except for models_only: the G-buffer's depth is only read.
+  // The working G-buffer's depth-stencil, for Accumulate's models_only stencil test. The passes
+  // sample its depth while it is attached, but never write it (depth test off, stencil mask 0):
+  // no texel is both written and read, so no feedback loop (OpenGL 4.5, 9.3.1).
   return AttachTextures(fbo_,
                         {{GL_COLOR_ATTACHMENT0, live_},
                          {GL_COLOR_ATTACHMENT1, retained_},
