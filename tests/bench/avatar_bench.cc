@@ -44,6 +44,7 @@ struct AvatarBenchOptions {
   bool model_shadows = true;  // RendererOptions::dynamic_objects_cast_shadows
   bool view_cache = true;     // RendererOptions::view_cache
   std::string avseq;          // a walk.avseq to draw instead of the procedural walker
+  bool cylinders = true;      // the cylinders peer
 };
 
 struct Walker {
@@ -99,7 +100,8 @@ struct Timing {
   double wall_ms = 0, cpu_ms = 0;
 };
 
-int Run(const AvatarBenchOptions& o) {
+// out (MeasureViewerAvatarCost): the figures go there instead of the JSON summary.
+int Run(const AvatarBenchOptions& o, ViewerAvatarCost* out = nullptr) {
   const scene::SyntheticCampus world = scene::BuiltinCampus();
   const TriangleMesh mesh = scene::BuildStaticMesh(world, 2.0);
   std::vector<int> counts;
@@ -108,6 +110,7 @@ int Run(const AvatarBenchOptions& o) {
   auto context = viewer::CreateHeadlessContext(o.width, o.height);
   if (!context.ok()) {
     std::cerr << "ave-bench avatars: " << context.status().message() << "\n";
+    if (out) out->error = std::string(context.status().message());
     return 1;
   }
   viewer::RendererOptions renderer_options;
@@ -116,6 +119,7 @@ int Run(const AvatarBenchOptions& o) {
   auto made = viewer::Renderer::Create(renderer_options);
   if (!made.ok()) {
     std::cerr << "ave-bench avatars: " << made.status().message() << "\n";
+    if (out) out->error = std::string(made.status().message());
     return 1;
   }
   viewer::Renderer& r = **made;
@@ -213,7 +217,7 @@ int Run(const AvatarBenchOptions& o) {
         cv::imwrite(o.png, bgr);
       }
     }
-    with_cylinders.push_back(time_frames(people, false));
+    with_cylinders.push_back(o.cylinders ? time_frames(people, false) : Timing{std::nan(""), std::nan("")});
     const Timing& a = with_avatars.back();
     const Timing& c = with_cylinders.back();
     std::printf("%8d  %10.2f %11.2f  %10.2f %11.2f\n", n, a.wall_ms, a.cpu_ms, c.wall_ms, c.cpu_ms);
@@ -260,6 +264,14 @@ int Run(const AvatarBenchOptions& o) {
   const double per_100 = at(100, with_avatars) - at(0, with_avatars);
   const double per_100_cylinders = at(100, with_cylinders) - at(0, with_cylinders);
   const double cpu_per_100 = at(100, with_avatars, true) - at(0, with_avatars, true);
+  if (out) {
+    out->ms_0 = at(0, with_avatars);
+    out->ms_100 = at(100, with_avatars);
+    out->cpu_ms_0 = at(0, with_avatars, true);
+    out->cpu_ms_100 = at(100, with_avatars, true);
+    out->sequence = walk.name;
+    return 0;
+  }
   std::printf("100 avatars cost %.2f ms per frame more than none (target <= 5 ms); 100 cylinders %.2f ms; wrote %s\n",
               per_100, per_100_cylinders, o.png.c_str());
   std::printf("{\"bench\":\"avatars\",\"width\":%d,\"height\":%d,\"frames\":%d", o.width, o.height, o.frames);
@@ -273,6 +285,17 @@ int Run(const AvatarBenchOptions& o) {
 }
 
 }  // namespace
+
+ViewerAvatarCost MeasureViewerAvatarCost(int frames) {
+  AvatarBenchOptions o;
+  o.frames = frames;
+  o.counts = "0,100";
+  o.png.clear();
+  o.cylinders = false;
+  ViewerAvatarCost cost;
+  if (Run(o, &cost) != 0 && cost.error.empty()) cost.error = "ave-bench avatars failed";
+  return cost;
+}
 
 Runner AddAvatarBench(CLI::App& sub) {
   auto o = std::make_shared<AvatarBenchOptions>();

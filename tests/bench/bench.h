@@ -1,7 +1,9 @@
 #pragma once
 // Shared pieces of ave-bench subcommands: a subcommand adds its options to its CLI11 app and
 // returns the function that runs it (after parsing).
+#include <cmath>
 #include <functional>
+#include <string>
 
 #include <CLI/CLI.hpp>
 
@@ -58,6 +60,16 @@ Runner AddRecordBench(CLI::App& sub);
 // `ave-bench avatars` (issue 17): viewer ms per frame for 0..100 walking avatars, cylinders as the
 // peer, PNG of the largest count, JSON with viewer_ms_per_100_avatars (avatar_bench.cc).
 Runner AddAvatarBench(CLI::App& sub);
+// ave-bench avatars' measurement of 0 and 100 walking people as avatars at 1280x720 (three campus
+// cameras projecting, the procedural walker, `frames` timed frames each, no cylinder peer, no
+// PNG), for other benches' summaries (ave-bench studio): wall and CPU ms per frame; error set
+// (and the figures NaN) when no context or renderer could be made.
+struct ViewerAvatarCost {
+  double ms_0 = std::nan(""), ms_100 = std::nan(""), cpu_ms_0 = std::nan(""), cpu_ms_100 = std::nan("");
+  std::string sequence;  // the avatar sequence's name
+  std::string error;
+};
+ViewerAvatarCost MeasureViewerAvatarCost(int frames);
 
 // Pins the process to one CPU and keeps OpenCV single-threaded, so figures are per core.
 void UseOneCore();

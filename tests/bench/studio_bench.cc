@@ -7,6 +7,9 @@
 // marching cubes against our marching cubes (same voxels), strict carving (no tolerance), and no
 // shadow removal. Writes a plot and a textured reconstruction rendered beside a camera image.
 // --actor boxes scores the simulator's boxes actor (same skeleton and walk) instead of the body.
+// First (--no-avatars skips it), the viewer's cost of 100 walking avatars as `ave-bench avatars`
+// measures it (the procedural walker: a reconstructed walk needs a whole walk cycle of frame sets,
+// `ave-studio` writes one and `ave-bench avatars --avseq` draws it), for the JSON summary.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -40,6 +43,8 @@ struct StudioBenchOptions {
   std::string render_png = "studio_render.png";
   std::string slice_png = "studio_hull_slices.png";
   std::string actor = "body";  // the simulated actor: body (default) or boxes (the hull's hard case)
+  bool avatars = true;     // the viewer's cost of 100 walking avatars (ave-bench avatars' measurement)
+  int avatar_frames = 10;  // timed frames per count there
 };
 
 double CpuMs(ThreadCpuClock::time_point t0) { return std::chrono::duration<double, std::milli>(ThreadCpuClock::now() - t0).count(); }
@@ -231,6 +236,15 @@ void SlicePng(const std::vector<std::pair<std::string, const studio::VoxelGrid*>
 int RunStudio(const StudioBenchOptions& o) {
   const std::optional<sim::StudioActor> actor = sim::ParseStudioActor(o.actor);
   if (!actor) return std::cerr << "ave-bench studio: --actor must be body or boxes, not '" << o.actor << "'\n", 1;
+  // First, before the process is pinned to one core: llvmpipe's threads are the software GPU.
+  ViewerAvatarCost avatars;
+  if (o.avatars) {
+    std::printf("viewer: 0 and 100 walking avatars (ave-bench avatars --counts 0,100 --frames %d, no cylinders)\n",
+                o.avatar_frames);
+    avatars = MeasureViewerAvatarCost(o.avatar_frames);
+    if (!avatars.error.empty()) std::printf("viewer: not measured: %s\n", avatars.error.c_str());
+    std::printf("\n");
+  }
   UseOneCore();
   std::vector<Row> rows;
   double sil_iou_removed = 0, sil_iou_kept = 0, sil_ms_removed = 0, sil_ms_kept = 0;
@@ -472,12 +486,22 @@ int RunStudio(const StudioBenchOptions& o) {
   if (flat10 && box10) std::printf("hull at 10 mm on one box: hierarchical %.1f ms vs flat %.1f ms (x%.1f)\n", box10->hull_ms, flat10->hull_ms, flat10->hull_ms / box10->hull_ms);
   Plot(rows, o.png);
   std::printf("wrote %s, %s and %s\n", o.png.c_str(), o.render_png.c_str(), o.slice_png.c_str());
+  const double per_100 = avatars.ms_100 - avatars.ms_0, cpu_per_100 = avatars.cpu_ms_100 - avatars.cpu_ms_0;
+  if (o.avatars && avatars.error.empty()) {
+    std::printf("viewer: 100 walking avatars ('%s') cost %.1f ms per frame more than none (%.1f -> %.1f ms; CPU %.1f -> %.1f "
+                "ms, +%.1f) at 1280x720 under 3 projecting cameras; issue 17's target: <= 5 ms\n",
+                avatars.sequence.c_str(), per_100, avatars.ms_0, avatars.ms_100, avatars.cpu_ms_0, avatars.cpu_ms_100, cpu_per_100);
+  }
   if (!main10) return 0;
+  // JSON numbers, or null where the viewer's figures were skipped (--no-avatars) or failed.
+  auto number = [](double v) { return std::isfinite(v) ? cv::format("%.3f", v) : std::string("null"); };
   std::printf("{\"bench\": \"studio\", \"voxel_mm\": 10, \"volume_iou\": %.4f, \"chamfer_mm\": %.2f, \"ms_per_frameset\": %.1f, "
               "\"texture_err_levels\": %.1f, \"silhouette_iou\": %.4f, \"silhouette_iou_no_shadow_removal\": %.4f, \"triangles\": %.0f, "
-              "\"volume_iou_strict\": %.4f, \"chamfer_mm_strict\": %.2f}\n",
+              "\"volume_iou_strict\": %.4f, \"chamfer_mm_strict\": %.2f, \"viewer_ms_0_avatars\": %s, \"viewer_ms_100_avatars\": %s, "
+              "\"viewer_ms_per_100_avatars\": %s, \"viewer_cpu_ms_per_100_avatars\": %s, \"viewer_avatar_sequence\": \"%s\"}\n",
               main10->volume_iou, main10->chamfer_mm, main10->ms, main10->texture_err, sil_iou_removed, sil_iou_kept, main10->triangles,
-              strict10 ? strict10->volume_iou : 0.0, strict10 ? strict10->chamfer_mm : 0.0);
+              strict10 ? strict10->volume_iou : 0.0, strict10 ? strict10->chamfer_mm : 0.0, number(avatars.ms_0).c_str(),
+              number(avatars.ms_100).c_str(), number(per_100).c_str(), number(cpu_per_100).c_str(), avatars.sequence.c_str());
   return 0;
 }
 
@@ -496,6 +520,11 @@ Runner AddStudioBench(CLI::App& sub) {
       ->check(CLI::IsMember({"body", "boxes"}));
   sub.add_option("--slice-png", options->slice_png, "horizontal slices of the hulls against the true actor (first frame, 10 mm)")->capture_default_str();
   sub.add_option("--render-png", options->render_png, "a camera image beside the textured reconstruction rendered from it")->capture_default_str();
+  sub.add_flag("!--no-avatars", options->avatars,
+               "skip the viewer's cost of 100 walking avatars (viewer_* figures null in the JSON summary)");
+  sub.add_option("--avatar-frames", options->avatar_frames, "timed viewer frames per avatar count")
+      ->capture_default_str()
+      ->check(ave::cli::Range(1, 1000));
   return [options] { return RunStudio(*options); };
 }
 

@@ -122,6 +122,7 @@ struct Renderer::Impl {
 absl::Status Renderer::Impl::Render(const std::vector<View>& views, int w, int h) {
   FramebufferGuard guard;
   const GLuint target = guard.draw();
+  const bool target_depth = internal::DrawFramebufferHasDepth();
   if (absl::Status s = EnsureTargets(w, h); !s.ok()) return s;
   // Shadow maps, only where a projector's pose or the geometry changed.
   if (absl::Status s = shadows->Update(cameras, statics, dynamics, *avatars, stats); !s.ok()) return s;
@@ -134,7 +135,8 @@ absl::Status Renderer::Impl::Render(const std::vector<View>& views, int w, int h
     const Viewport& v = view.viewport;
     glViewport(v.x, v.y, v.width, v.height);
     glScissor(v.x, v.y, v.width, v.height);
-    const ViewFrame seen = SeenBy(frame, view, target);
+    ViewFrame seen = SeenBy(frame, view, target);
+    seen.target_depth = target_depth;
     // Views that share pixels with another view of this call cannot keep a cache (shared targets).
     bool cached = cache.On();
     for (size_t k = 0; k < views.size() && cached; ++k) cached = k == slot || !internal::Overlap(views[k].viewport, v);
@@ -156,7 +158,7 @@ absl::Status Renderer::Impl::Render(const std::vector<View>& views, int w, int h
 absl::Status Renderer::Impl::EnsureTargets(int w, int h) {
   if (w == width && h == height) return absl::OkStatus();
   if (absl::Status s = gbuffer->Resize(w, h); !s.ok()) return s;
-  if (absl::Status s = projection->Resize(w, h); !s.ok()) return s;
+  if (absl::Status s = projection->Resize(w, h, gbuffer->working().depth); !s.ok()) return s;
   width = w;
   height = h;
   if (absl::Status s = cache.Resize(w, h); !s.ok()) return s;
@@ -220,7 +222,13 @@ void Renderer::Impl::DrawViewExact(const FrameContext& frame, const View& view, 
 
 void Renderer::Impl::AccumulateAndResolve(const FrameContext& frame, const View& view, const ViewFrame& seen,
                                           const View* output, const std::vector<Viewport>* rects) {
-  projection->Accumulate(frame, view, seen, gbuffer->working(), rects);
+  // The rectangles of a cached view (issue 17): the projector passes shade only the models' own
+  // pixels (marked in the G-buffer's stencil), and the resolve writes only where the working
+  // depth is nearer than the cached view's already in the target: around the models the cached
+  // resolve stays.
+  // Without a depth buffer in the target, the rectangles are resolved in full.
+  const bool models_only = rects != nullptr && seen.target_depth;
+  projection->Accumulate(frame, view, seen, gbuffer->working(), rects, models_only);
   glBindFramebuffer(GL_FRAMEBUFFER, seen.target);
   const internal::GbufferTargets& g = gbuffer->working();
   ResolveSource source;
@@ -237,7 +245,8 @@ void Renderer::Impl::AccumulateAndResolve(const FrameContext& frame, const View&
   } else if (rects != nullptr) {
     for (const Viewport& r : *rects) {
       glScissor(r.x, r.y, r.width, r.height);
-      resolve->Resolve(frame, view, seen.any_live, seen.any_retained, source);
+      resolve->Resolve(frame, view, seen.any_live, seen.any_retained, source,
+                       models_only ? ResolveMode::kNearer : ResolveMode::kPlain);
     }
   } else {
     resolve->Resolve(frame, view, seen.any_live, seen.any_retained, source);
@@ -297,10 +306,13 @@ void Renderer::Impl::DrawViewCached(const FrameContext& frame, const std::vector
     if (cameras.slots()[frame.passes[k].layer].shadow.dynamic_has_models) shadowed = true;
   }
   shadowed = shadowed && entry.any_live && options.dynamic_objects_cast_shadows;
-  // A crowd (issue 17): counting every model's shadow volumes in the stencil (each from the model
-  // to the end of its projector's frustum) and then testing the pixels inside them cost more than
-  // testing the entries of every pixel in the resolve itself (ave-bench avatars, 100 people under
-  // 3 cameras: ~160 ms against ~50 ms more than the plain resolve, CPU).
+  // A crowd (issue 17): counting every model's shadow volumes in the stencil and then testing the
+  // pixels inside them cost more than testing the entries of every pixel in the resolve itself
+  // (ave-bench avatars, 100 people under 3 cameras: ~160 ms against ~50 ms more than the plain
+  // resolve, CPU). Still so with the volumes cut where the static surface behind each model ends
+  // (~95 ms): the people's shadows from three low cameras cover ~70% of that view, and a stencil
+  // of pixels with an entry inside some model's own rectangle, drawn over the whole view, cost as
+  // much (~90 ms, docs/BENCHMARKS.md "100 avatars under projected video").
   const bool crowd = shadowed && dynamics.model_bounds().size() > kCrowdModels;
   glBindFramebuffer(GL_FRAMEBUFFER, seen.target);
   const ResolveSource source = cache.Source(entry);
@@ -338,7 +350,8 @@ void Renderer::Impl::DrawViewCached(const FrameContext& frame, const std::vector
     // Every model lies in its own rectangle: one draw within their union writes no pixel outside.
     glScissor(all.x, all.y, all.width, all.height);
     gbuffer->Bind();
-    gbuffer->Draw(view, layers(), /*with_static=*/false, /*with_dynamic=*/true, stats);
+    // The copies brought the cache's stencil (0): the models' own pixels are marked.
+    gbuffer->Draw(view, layers(), /*with_static=*/false, /*with_dynamic=*/true, stats, /*mark_models=*/true);
     AccumulateAndResolve(frame, view, seen, nullptr, &entry.patches);
     stats.view_cache_patches += entry.patches.size();
   }

@@ -430,5 +430,29 @@ TEST(CoveringTilesTest, CoversEachPixelOnceInsideTheViewport) {
   EXPECT_TRUE(internal::CoveringTiles({}, viewport, 8).empty());
 }
 
+// The models' shadow volumes end where the static surface behind them ends (issue 17): the
+// deepest static depth around a rectangle of the shadow map, as a distance along the projector's
+// axis, padded as the volumes' rectangles are; unknown (sky there, or nothing read back): infinity.
+TEST(StaticDeepestTest, DeepestSurfaceAroundTheRectangle) {
+  const Eigen::Matrix4d projection = GlProjection(PinholeIntrinsics::FromFov(64, 64, 60), 0.5, 200);
+  auto window_depth = [&](double distance_m) {
+    const Eigen::Vector4d clip = projection * Eigen::Vector4d(0, 0, -distance_m, 1);
+    return static_cast<float>(0.5 * clip.z() / clip.w() + 0.5);
+  };
+  const int size = 64;
+  std::vector<float> depth(static_cast<size_t>(size) * size, window_depth(10));
+  for (int y = 40; y < 48; ++y)
+    for (int x = 40; x < 48; ++x) depth[y * size + x] = window_depth(30);  // a far patch
+  for (int x = 0; x < 16; ++x) depth[60 * size + x] = 1.0f;                 // sky in the top-left tile
+  internal::ShadowSlot slot;
+  EXPECT_TRUE(std::isinf(internal::StaticDeepestM(slot, {2, 2, 4, 4}, projection))) << "nothing read back";
+  internal::SetDeepestTiles(depth, size, slot);
+  ASSERT_EQ(slot.deepest_tiles_side, 4);
+  EXPECT_NEAR(internal::StaticDeepestM(slot, {2, 2, 4, 4}, projection), 10, 1e-3);
+  EXPECT_NEAR(internal::StaticDeepestM(slot, {20, 20, 10, 10}, projection), 30, 1e-2) << "its tiles reach the far patch";
+  EXPECT_NEAR(internal::StaticDeepestM(slot, {18, 2, 8, 8}, projection), 10, 1e-3);
+  EXPECT_TRUE(std::isinf(internal::StaticDeepestM(slot, {1, 50, 4, 4}, projection))) << "sky behind it";
+}
+
 }  // namespace
 }  // namespace ave::viewer

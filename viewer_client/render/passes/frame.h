@@ -60,6 +60,7 @@ struct ViewFrame {
   std::vector<char> visible;  // per FrameContext::passes: its volume may show in the view
   bool any_live = false, any_retained = false;
   GLuint target = 0;  // the caller's draw framebuffer
+  bool target_depth = false;  // it has a depth buffer (the models of a cached view need one)
 };
 
 }  // namespace ave::viewer::internal

@@ -7,10 +7,11 @@ namespace ave::viewer::internal {
 absl::Status GbufferTargets::Resize(int width, int height, const char* what) {
   color = MakeTexture2D(GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE, width, height);
   normal = MakeTexture2D(GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE, width, height);
-  depth = MakeTexture2D(GL_DEPTH_COMPONENT32F, GL_DEPTH_COMPONENT, GL_FLOAT, width, height);
-  const absl::Status complete =
-      AttachTextures(fbo, {{GL_COLOR_ATTACHMENT0, color}, {GL_COLOR_ATTACHMENT1, normal}, {GL_DEPTH_ATTACHMENT, depth}},
-                     what);
+  // Depth with a stencil (issue 17): the people's own pixels, marked when they are drawn over a
+  // cached view, limit the projector passes that read this G-buffer (ProjectionPass::Accumulate).
+  depth = MakeTexture2D(GL_DEPTH32F_STENCIL8, GL_DEPTH_STENCIL, GL_FLOAT_32_UNSIGNED_INT_24_8_REV, width, height);
+  const absl::Status complete = AttachTextures(
+      fbo, {{GL_COLOR_ATTACHMENT0, color}, {GL_COLOR_ATTACHMENT1, normal}, {GL_DEPTH_STENCIL_ATTACHMENT, depth}}, what);
   const GLenum gbuffers[] = {GL_COLOR_ATTACHMENT0, GL_COLOR_ATTACHMENT1};
   glDrawBuffers(2, gbuffers);
   return complete;
@@ -35,12 +36,20 @@ void GbufferPass::ApplyState() {
 void GbufferPass::Clear() {
   glClearColor(0, 0, 0, 0);
   glClearDepth(1.0);
-  glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+  glClearStencil(0);
+  glStencilMask(0xFF);
+  glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT | GL_STENCIL_BUFFER_BIT);
 }
 
 void GbufferPass::Draw(const View& view, const SceneLayers& layers, bool with_static, bool with_dynamic,
-                       RenderStats& stats) const {
+                       RenderStats& stats, bool mark_models) const {
   ApplyState();
+  if (mark_models) {
+    glEnable(GL_STENCIL_TEST);
+    glStencilMask(kModelStencilBit);
+    glStencilFunc(GL_ALWAYS, kModelStencilBit, kModelStencilBit);
+    glStencilOp(GL_KEEP, GL_KEEP, GL_REPLACE);
+  }
   glUseProgram(program_.id);
   const Uniforms& u = program_.u;
   glUniformMatrix4fv(u["u_clip_from_local"], 1, GL_FALSE, ToGlArray(view.projection * view.view).data());

@@ -15,7 +15,11 @@
 
 namespace ave::viewer::internal {
 
-// A G-buffer: colour (attachment 0), normal (1) and depth textures on one framebuffer.
+// Stencil bit of a G-buffer where a dynamic model or avatar is the nearest surface: set when they
+// are drawn with mark_models (GbufferPass::Draw), cleared with the G-buffer (GbufferPass::Clear).
+inline constexpr GLuint kModelStencilBit = 0x01;
+
+// A G-buffer: colour (attachment 0), normal (1) and depth-stencil textures on one framebuffer.
 struct GbufferTargets {
   Framebuffer fbo = Framebuffer::Create();
   Texture color, normal, depth;
@@ -39,11 +43,12 @@ class GbufferPass {
   absl::Status Resize(int width, int height) { return working_.Resize(width, height, "G-buffer"); }
   // Binds the working G-buffer for drawing.
   void Bind() const { glBindFramebuffer(GL_FRAMEBUFFER, working_.fbo); }
-  // The bound framebuffer's colour and depth cleared within the scissor box (colour 0, depth 1).
+  // The bound framebuffer's colour, depth and stencil cleared within the scissor box (0, 1, 0).
   static void Clear();
   // The static model and sky (with_static) and the dynamic models (with_dynamic) of `view` into
-  // the bound G-buffer, within the scissor box.
-  void Draw(const View& view, const SceneLayers& layers, bool with_static, bool with_dynamic, RenderStats& stats) const;
+  // the bound G-buffer, within the scissor box. mark_models: kModelStencilBit set where they are drawn.
+  void Draw(const View& view, const SceneLayers& layers, bool with_static, bool with_dynamic, RenderStats& stats,
+            bool mark_models = false) const;
 
   const GbufferTargets& working() const { return working_; }
   // The state a G-buffer is drawn and cleared in: scissored, depth tested (less) and written.

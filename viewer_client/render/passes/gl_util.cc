@@ -120,6 +120,18 @@ void ResetPassState() {
   glColorMask(GL_TRUE, GL_TRUE, GL_TRUE, GL_TRUE);
 }
 
+bool DrawFramebufferHasDepth() {
+  GLint bound = 0;
+  glGetIntegerv(GL_DRAW_FRAMEBUFFER_BINDING, &bound);
+  const GLenum attachment = bound == 0 ? GLenum{GL_DEPTH} : GLenum{GL_DEPTH_ATTACHMENT};
+  GLint type = GL_NONE;
+  glGetFramebufferAttachmentParameteriv(GL_DRAW_FRAMEBUFFER, attachment, GL_FRAMEBUFFER_ATTACHMENT_OBJECT_TYPE, &type);
+  if (type == GL_NONE) return false;
+  GLint bits = 0;
+  glGetFramebufferAttachmentParameteriv(GL_DRAW_FRAMEBUFFER, attachment, GL_FRAMEBUFFER_ATTACHMENT_DEPTH_SIZE, &bits);
+  return bits > 0;
+}
+
 absl::Status CheckGl(const char* where) {
   const GLenum error = glGetError();
   if (error == GL_NO_ERROR) return absl::OkStatus();

@@ -140,6 +140,8 @@ class FramebufferGuard {
 void ResetPassState();
 
 absl::Status CheckGl(const char* where);
+// Whether the framebuffer bound for drawing (the default one or an object) has depth bits.
+bool DrawFramebufferHasDepth();
 absl::Status CheckFramebuffer(GLenum target, const char* what);
 
 // Attaches 2D textures (attachment, texture) to `fbo`, leaves it bound and checks it is complete;

@@ -32,8 +32,14 @@ Eigen::Matrix4d LocalFromWindow(const View& view) {
 // volume cover every pixel whose view ray meets the volume exactly once, with the eye inside or
 // outside it; depth clamping keeps far faces beyond the view's far plane. kCombined: full-screen
 // triangles. Both add (blend) or overwrite (last wins), scissored, no depth test.
-void ProjectionPass::ApplyState(State state, bool blend) {
+void ProjectionPass::ApplyState(State state, bool blend) const {
   ResetPassState();
+  if (models_only_) {
+    glEnable(GL_STENCIL_TEST);
+    glStencilMask(0);
+    glStencilFunc(GL_EQUAL, kModelStencilBit, kModelStencilBit);
+    glStencilOp(GL_KEEP, GL_KEEP, GL_KEEP);
+  }
   if (state == State::kVolumes) {
     glEnable(GL_CULL_FACE);
     glCullFace(GL_FRONT);
@@ -77,17 +83,36 @@ absl::StatusOr<std::unique_ptr<ProjectionPass>> ProjectionPass::Create(const Ren
         Program::Build("shaders/projector.vert.glsl", "shaders/projector.frag.glsl", defines, projector_names);
     if (!mapping.ok()) return mapping.status();
     pass->mapping_ = *std::move(mapping);
+    const std::string early = "#extension GL_ARB_shader_image_load_store : require\n#define EARLY_TESTS\n";
+    absl::StatusOr<Program> projector_models =
+        Program::Build("shaders/projector.vert.glsl", "shaders/projector.frag.glsl", early, projector_names);
+    if (!projector_models.ok()) return projector_models.status();
+    pass->projector_models_ = *std::move(projector_models);
+    absl::StatusOr<Program> combined_models =
+        Program::Build("shaders/resolve.vert.glsl", "shaders/projector.frag.glsl",
+                       early + "#define COMBINED\n#define BATCH " + std::to_string(kCombinedBatch) + "\n",
+                       {"u_gbuffer_normal", "u_gbuffer_depth", "u_local_from_window", "u_feather", "u_best_view",
+                        "u_last_wins", "u_weight_scale", "u_video", "u_shadow", "u_count", "u_clips",
+                        "u_shadow_clips", "u_pinholes", "u_distortions", "u_position_layers", "u_extras"});
+    if (!combined_models.ok()) return combined_models.status();
+    pass->combined_models_ = *std::move(combined_models);
   }
   return pass;
 }
 
-absl::Status ProjectionPass::Resize(int width, int height) {
+absl::Status ProjectionPass::Resize(int width, int height, GLuint depth_stencil) {
   live_ = MakeTexture2D(GL_RGBA32F, GL_RGBA, GL_FLOAT, width, height);
   retained_ = MakeTexture2D(GL_RGBA32F, GL_RGBA, GL_FLOAT, width, height);
   fade_ = MakeTexture2D(GL_R32F, GL_RED, GL_FLOAT, width, height);
-  return AttachTextures(
-      fbo_, {{GL_COLOR_ATTACHMENT0, live_}, {GL_COLOR_ATTACHMENT1, retained_}, {GL_COLOR_ATTACHMENT2, fade_}},
-      "projector accumulation");
+  // The working G-buffer's depth-stencil, for Accumulate's models_only stencil test. The passes
+  // sample its depth while it is attached, but never write it (depth test off, stencil mask 0):
+  // no texel is both written and read, so no feedback loop (OpenGL 4.5, 9.3.1).
+  return AttachTextures(fbo_,
+                        {{GL_COLOR_ATTACHMENT0, live_},
+                         {GL_COLOR_ATTACHMENT1, retained_},
+                         {GL_COLOR_ATTACHMENT2, fade_},
+                         {GL_DEPTH_STENCIL_ATTACHMENT, depth_stencil}},
+                        "projector accumulation");
 }
 
 void ProjectionPass::UseProgram(const View& view, const Program& program) const {
@@ -110,7 +135,7 @@ void ProjectionPass::BindInputs(const View& view, const Program& program, const 
 }
 
 void ProjectionPass::Accumulate(const FrameContext& frame, const View& view, const ViewFrame& seen,
-                                const GbufferTargets& gbuffer, const std::vector<Viewport>* rects) {
+                                const GbufferTargets& gbuffer, const std::vector<Viewport>* rects, bool models_only) {
   // Within the scissor box, or within each rectangle in turn (one framebuffer binding for all).
   auto each = [rects](auto&& draw) {
     if (rects == nullptr) return draw();
@@ -129,7 +154,8 @@ void ProjectionPass::Accumulate(const FrameContext& frame, const View& view, con
   glDrawBuffers(3, all_accum);
   GbufferPass::ApplyState();
   if (seen.any_live || seen.any_retained) each([] { glClear(GL_COLOR_BUFFER_BIT); });
-  BindInputs(view, projector_, gbuffer);
+  models_only_ = models_only && projector_models_.id != 0;
+  BindInputs(view, projector(), gbuffer);
   BindTexture(kVideoUnit, GL_TEXTURE_2D_ARRAY, video_.live());
   BindTexture(kShadowUnit, GL_TEXTURE_2D_ARRAY,
               options_.dynamic_objects_cast_shadows ? shadows_.live_dynamic() : shadows_.live_static());
@@ -141,15 +167,16 @@ void ProjectionPass::Accumulate(const FrameContext& frame, const View& view, con
   } else {
     for (size_t k = 0; k < frame.passes.size(); ++k) {
       if (!seen.visible[k] || frame.passes[k].retained) continue;
-      each([&] { DrawPass(projector_.u, frame.passes[k], k, last_wins, frame.stats); });
+      each([&] { DrawPass(projector().u, frame.passes[k], k, last_wins, frame.stats); });
     }
   }
   if (seen.any_retained) each([&] { DrawRetained(frame, view, seen, gbuffer); });
+  models_only_ = false;
 }
 
 void ProjectionPass::DrawRetained(const FrameContext& frame, const View& view, const ViewFrame& seen,
                                   const GbufferTargets& gbuffer) {
-  BindInputs(view, projector_, gbuffer);
+  BindInputs(view, projector(), gbuffer);
   DrawRetainedPasses(frame, seen);
 }
 
@@ -160,7 +187,7 @@ void ProjectionPass::DrawRetainedPasses(const FrameContext& frame, const ViewFra
   glDrawBuffers(2, retained_buffers);
   ApplyState(State::kVolumes, /*blend=*/true);
   for (size_t k = 0; k < frame.passes.size(); ++k) {
-    if (seen.visible[k] && frame.passes[k].retained) DrawPass(projector_.u, frame.passes[k], k, false, frame.stats);
+    if (seen.visible[k] && frame.passes[k].retained) DrawPass(projector().u, frame.passes[k], k, false, frame.stats);
   }
 }
 
@@ -218,8 +245,8 @@ void ProjectionPass::DrawCombinedLive(const FrameContext& frame, const View& vie
   }
   if (reach.empty()) return;
   ApplyState(State::kCombined, /*blend=*/!last_wins);
-  UseProgram(view, combined_);
-  const Uniforms& u = combined_.u;
+  UseProgram(view, combined());
+  const Uniforms& u = combined().u;
   glUniform1i(u["u_last_wins"], last_wins ? 1 : 0);
   glUniform1f(u["u_weight_scale"], 1.0f);
   glBindVertexArray(empty_vao_);

@@ -29,16 +29,20 @@ class ProjectionPass {
   static absl::StatusOr<std::unique_ptr<ProjectionPass>> Create(const RendererOptions& options, bool with_mapping,
                                                                 const VideoLayers& video, const ShadowMaps& shadows);
 
-  absl::Status Resize(int width, int height);
+  // The accumulation targets at width x height; `depth_stencil` (the working G-buffer's, the same
+  // size) is attached for Accumulate's models_only stencil test.
+  absl::Status Resize(int width, int height, GLuint depth_stencil);
   // The frame's frustum volumes, 36 vertices per FrameContext::passes entry in order.
   void UploadVolumes(const std::vector<LineVertex>& volumes) { volumes_.Upload(volumes, GL_STREAM_DRAW); }
 
   // The view's visible passes into the working accumulation targets (only those the passes write
   // are cleared), reading `gbuffer`, within the scissor box, or within each of `rects` (the
   // patches of a cached view: every pass draws all of them before the next pass, leaving the
-  // scissor box at the last).
+  // scissor box at the last). models_only (needs the image load/store programs of Create's
+  // with_mapping): the passes shade only where `gbuffer`, the working one, has kModelStencilBit
+  // set (the targets are still cleared within the scissor box or rectangles).
   void Accumulate(const FrameContext& frame, const View& view, const ViewFrame& seen, const GbufferTargets& gbuffer,
-                  const std::vector<Viewport>* rects = nullptr);
+                  const std::vector<Viewport>* rects = nullptr, bool models_only = false);
   // The view cache's mapping: the visible live passes' entries into `mapping` (image load/store,
   // a barrier between projectors), reading `gbuffer`.
   void DrawMapping(const FrameContext& frame, const View& view, const ViewFrame& seen, const GbufferTargets& gbuffer,
@@ -54,7 +58,11 @@ class ProjectionPass {
   ProjectionPass(const RendererOptions& options, const VideoLayers& video, const ShadowMaps& shadows)
       : options_(options), video_(video), shadows_(shadows), volumes_(/*with_normals=*/false, /*indexed=*/false) {}
   enum class State { kVolumes, kCombined };
-  static void ApplyState(State state, bool blend);
+  // With models_only_, the stencil test of Accumulate's models_only.
+  void ApplyState(State state, bool blend) const;
+  // The per-projector and combined programs, with early stencil tests while models_only_.
+  const Program& projector() const { return models_only_ ? projector_models_ : projector_; }
+  const Program& combined() const { return models_only_ ? combined_models_ : combined_; }
   // `program` bound with the uniforms every projector program takes (units, view, overlap policy).
   void UseProgram(const View& view, const Program& program) const;
   // UseProgram, and `program` reads the G-buffer's normal and depth.
@@ -68,6 +76,8 @@ class ProjectionPass {
   const VideoLayers& video_;
   const ShadowMaps& shadows_;
   Program projector_, combined_, mapping_;
+  Program projector_models_, combined_models_;  // EARLY_TESTS (with_mapping only)
+  bool models_only_ = false;                    // within Accumulate(models_only = true)
   MeshBuffers volumes_;
   VertexArray empty_vao_ = VertexArray::Create();
   Framebuffer fbo_ = Framebuffer::Create();

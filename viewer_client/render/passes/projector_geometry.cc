@@ -85,6 +85,36 @@ Eigen::Vector4d ModelNdcRect(const Projector& p, const Viewport& rect, int shado
                                   2 * (rect.y + rect.height + pad) / shadow_map_size - 1);
 }
 
+void SetDeepestTiles(const std::vector<float>& depth, int size, ShadowSlot& slot) {
+  const int side = (size + kDeepestTile - 1) / kDeepestTile;
+  slot.deepest_tiles_side = side;
+  slot.deepest_tiles.assign(static_cast<size_t>(side) * side, 0.0f);
+  for (int row = 0; row < size; ++row) {
+    float* tiles = slot.deepest_tiles.data() + static_cast<size_t>(row / kDeepestTile) * side;
+    const float* line = depth.data() + static_cast<size_t>(row) * size;
+    for (int col = 0; col < size; ++col) tiles[col / kDeepestTile] = std::max(tiles[col / kDeepestTile], line[col]);
+  }
+}
+
+double StaticDeepestM(const ShadowSlot& slot, const Viewport& rect, const Eigen::Matrix4d& shadow_projection) {
+  const int side = slot.deepest_tiles_side;
+  if (side <= 0 || slot.deepest_tiles.size() != static_cast<size_t>(side) * side) {
+    return std::numeric_limits<double>::infinity();
+  }
+  const int pad = static_cast<int>(std::ceil(kNormalOffsetTexels)) + 2;
+  const int x0 = std::clamp((rect.x - pad) / kDeepestTile, 0, side - 1);
+  const int y0 = std::clamp((rect.y - pad) / kDeepestTile, 0, side - 1);
+  const int x1 = std::clamp((rect.x + rect.width + pad) / kDeepestTile, 0, side - 1);
+  const int y1 = std::clamp((rect.y + rect.height + pad) / kDeepestTile, 0, side - 1);
+  float deepest = 0;
+  for (int y = y0; y <= y1; ++y) {
+    for (int x = x0; x <= x1; ++x) deepest = std::max(deepest, slot.deepest_tiles[static_cast<size_t>(y) * side + x]);
+  }
+  if (deepest >= 1.0f) return std::numeric_limits<double>::infinity();
+  const Eigen::Vector4d eye = shadow_projection.inverse() * Eigen::Vector4d(0, 0, 2.0 * deepest - 1, 1);
+  return -eye.z() / eye.w();
+}
+
 Eigen::Vector4f ModelUvRect(const Projector& p, const Viewport& rect, int shadow_map_size, int layer_width,
                             int layer_height) {
   const Eigen::Vector4d r = ModelNdcRect(p, rect, shadow_map_size);

@@ -47,7 +47,21 @@ struct ShadowSlot {
   uint64_t dynamic_version = 0;
   bool dynamic_has_models = false;  // the dynamic layer holds some model (else it equals the static one)
   Viewport dynamic_rect;            // where (shadow-map pixels) it may differ from the static layer
+  // The static shadow map's deepest window depth per kDeepestTile x kDeepestTile texels (rows from
+  // the bottom; 1 where some texel sees nothing), with the read-back above; empty when not read.
+  // Cuts the models' shadow volumes where the surface behind them ends (issue 17).
+  std::vector<float> deepest_tiles;
+  int deepest_tiles_side = 0;
 };
+
+inline constexpr int kDeepestTile = 16;
+// The tiles of ShadowSlot::deepest_tiles from a static shadow map read back (size x size, rows from
+// the bottom).
+void SetDeepestTiles(const std::vector<float>& depth, int size, ShadowSlot& slot);
+// How far (depth along the projector's axis, metres) the static surface reaches behind the
+// shadow-map rectangle `rect` (pixels), padded as ModelNdcRect pads it: +infinity where unknown
+// (not read back, or some texel there sees nothing).
+double StaticDeepestM(const ShadowSlot& slot, const Viewport& rect, const Eigen::Matrix4d& shadow_projection);
 
 // A triangle wound counter-clockwise as seen from the side `outward` points to.
 template <typename V, typename Make>

@@ -28,6 +28,11 @@ void ResolvePass::ApplyState(ResolveMode mode) {
       glDepthFunc(GL_ALWAYS);
       glDepthMask(GL_TRUE);
       break;
+    case ResolveMode::kNearer:
+      glEnable(GL_DEPTH_TEST);
+      glDepthFunc(GL_LESS);
+      glDepthMask(GL_TRUE);
+      break;
     case ResolveMode::kMarkEntries:
       glDisable(GL_DEPTH_TEST);
       glDepthMask(GL_FALSE);
@@ -80,7 +85,7 @@ absl::StatusOr<std::unique_ptr<ResolvePass>> ResolvePass::Create(const RendererO
 
 void ResolvePass::Resolve(const FrameContext& frame, const View& view, bool any_live, bool any_retained,
                           const ResolveSource& source, ResolveMode mode, const Viewport* drawn) const {
-  const bool shadowed = mode != ResolveMode::kPlain;
+  const bool shadowed = mode != ResolveMode::kPlain && mode != ResolveMode::kNearer;
   const bool mark = mode == ResolveMode::kMarkEntries;
   ApplyState(mode);
   const int variant = (any_live ? 1 : 0) + (any_retained ? 2 : 0) + (source.cached ? 4 : 0) + (shadowed ? 8 : 0) +

@@ -37,6 +37,10 @@ enum class ResolveMode {
   // The plain cached resolve with every entry tested as kInVolumes tests them, colour and depth on
   // every pixel: for a crowd, whose shadow volumes cost more to count than this (issue 17).
   kShadowedAll,
+  // The plain resolve of a working G-buffer only where its depth is nearer than the bound
+  // framebuffer's (depth test less): the models drawn over a cached view keep the cached resolve
+  // around them (issue 17).
+  kNearer,
 };
 
 class ResolvePass {

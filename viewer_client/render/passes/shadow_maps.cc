@@ -75,6 +75,7 @@ ShadowMaps::ShadowMaps(const RendererOptions& options, Program program)
 void ShadowMaps::ReadExtent(const Eigen::Matrix4d& shadow_projection, ShadowSlot& slot) {
   const int size = options_.shadow_map_size;
   slot.sees_void = true;
+  slot.deepest_tiles.clear();
   if (size > 2048) return;
   readback_.resize(static_cast<size_t>(size) * size);
   glPixelStorei(GL_PACK_ALIGNMENT, 4);
@@ -91,6 +92,7 @@ void ShadowMaps::ReadExtent(const Eigen::Matrix4d& shadow_projection, ShadowSlot
   const Eigen::Vector4d eye = shadow_projection.inverse() * Eigen::Vector4d(0, 0, 2.0 * deepest - 1, 1);
   slot.visible_far_m = -eye.z() / eye.w();
   slot.sees_void = void_seen;
+  SetDeepestTiles(readback_, size, slot);
 }
 
 absl::Status ShadowMaps::UpdateLayer(Arrays& arrays, int layer, ShadowSlot& slot, const Projector& p,

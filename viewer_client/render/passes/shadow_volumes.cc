@@ -19,7 +19,8 @@ namespace {
 void AppendShadowVolumes(const Projector& p, const ShadowSlot& slot, const std::vector<Bounds>& models,
                          const Bounds& scene, int shadow_map_size, std::vector<LineVertex>& out) {
   if (!slot.dynamic_has_models) return;
-  const Eigen::Matrix4d shadow_clip = MakeProjectorGl(p, shadow_map_size).shadow_projection * p.view;
+  const Eigen::Matrix4d projection = MakeProjectorGl(p, shadow_map_size).shadow_projection;
+  const Eigen::Matrix4d shadow_clip = projection * p.view;
   const Eigen::Matrix4d local_from_eye = p.view.inverse(), eye_from_clip = p.projection.inverse();
   const double far_m = VolumeFarM(p, scene, slot);
   const Viewport map{0, 0, shadow_map_size, shadow_map_size};
@@ -32,8 +33,13 @@ void AppendShadowVolumes(const Projector& p, const ShadowSlot& slot, const std::
     if (!rect) continue;
     const Eigen::Vector4d ndc = ModelNdcRect(p, *rect, shadow_map_size);
     const double near_m = std::clamp(nearest, p.near_m, far_m);
+    // Cut where the static surface behind the model ends (issue 17): a surface point farther
+    // along the rectangle is hidden from the projector by the static model already (no entry to
+    // test), and a volume to the end of the frustum covered much of the view for each person.
+    const double behind_m = StaticDeepestM(slot, *rect, projection) * 1.01 + 0.05;
+    const double end_m = std::clamp(behind_m, near_m, far_m);
     AppendFrustumPiece(FrustumCorners(local_from_eye, eye_from_clip, ndc, near_m),
-                       FrustumCorners(local_from_eye, eye_from_clip, ndc, far_m), out);
+                       FrustumCorners(local_from_eye, eye_from_clip, ndc, end_m), out);
   }
 }
 

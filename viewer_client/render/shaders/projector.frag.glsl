@@ -18,6 +18,11 @@
 // no pow(). (Folding the view's inverse and the projector's matrix into one matrix saves one more
 // product but loses enough float precision on far points to double the visibility error against
 // 4096 px shadow maps: the point is computed first.)
+#ifdef EARLY_TESTS
+// The models' pixels of a cached view only (issue 17): the stencil test runs before the shader in
+// spite of its discards, so llvmpipe skips every block without a model pixel.
+layout(early_fragment_tests) in;
+#endif
 uniform sampler2D u_gbuffer_normal;  // packed unit normal; a: 0 where nothing was drawn
 uniform sampler2D u_gbuffer_depth;   // window depth in [0, 1]
 uniform mat4 u_local_from_window;   // local point (homogeneous) from (window x, y, NDC z, 1) of the view
