@@ -75,6 +75,16 @@ int main(int argc, char** argv) {
   app.add_option("--record-max-bytes", record_max,
                  "recording budget: oldest segments are deleted beyond it, recording stops when it cannot be kept "
                  "(bytes, or with K/M/G/T; 0 = the disk)")->capture_default_str();
+  int record_sync_ms = 500;
+  app.add_option("--record-sync-ms", record_sync_ms,
+                 "recorder: write, sync and index every this many ms; a crash may lose the frames of the last "
+                 "period plus one flush (acknowledged frames never)")
+      ->capture_default_str()->check(CLI::Range(10, 60000));
+  std::string record_sync = "syncfs";
+  app.add_option("--record-sync", record_sync,
+                 "recorder: syncfs (one sync of the recording's filesystem per period) or fdatasync (one per "
+                 "segment; bounds the flush time on a disk shared with heavy writers)")
+      ->capture_default_str()->check(CLI::IsMember({"syncfs", "fdatasync"}));
   app.add_option("--log-level", log_level, "debug, info, warning or error")->check(CLI::IsMember({"debug", "info", "warning", "error"}));
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-server")) return *exit_code;
   ave::log::MinLevel() = log_level == "debug" ? ave::log::Level::kDEBUG
@@ -110,6 +120,8 @@ int main(int argc, char** argv) {
     return 1;
   }
   options.record_max_bytes = static_cast<int64_t>(*max_bytes);
+  options.record_sync_period = std::chrono::milliseconds(record_sync_ms);
+  options.record_sync_per_file = record_sync == "fdatasync";
 
   // Signals are taken by a waiting thread, so shutdown runs outside any signal handler.
   sigset_t signals;

@@ -9,8 +9,9 @@
 // writer thread does the I/O. A full queue drops the frame (counted), so a slow disk never slows
 // sensors or live viewers.
 //
-// Crash order: each batch (about every flush_period) is written, fdatasync'd, and only then its
-// rows are committed in one transaction, so a row never points at bytes that are not on disk.
+// Crash order: each batch (about every flush_period) is written, made durable (one syncfs of the
+// recording's filesystem, or an fdatasync per segment: SyncMethod), and only then its rows are
+// committed in one transaction, so a row never points at bytes that are not on disk.
 // Open() truncates each segment back to its last indexed byte and removes segment files the
 // index does not know (written after the last commit).
 //
@@ -20,6 +21,8 @@
 // recording stops cleanly (one log line, ave_record_disk_full 1), frames are counted as skipped,
 // live serving goes on; every flush period the writer runs retention and tries again, and
 // recording resumes (one log line) as soon as a write fits.
+#include <sys/types.h>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -49,7 +52,18 @@ struct RecorderOptions {
   std::chrono::seconds segment_max_duration{60};     // or when its first frame is this old
   size_t queue_max_items = 4096;                     // bounded queue: frames/sweeps waiting for the writer
   int64_t queue_max_bytes = 256 << 20;               // and their JPEG bytes
-  std::chrono::milliseconds flush_period{500};       // write + fdatasync + one commit per period
+  // Write + sync + one commit per period (`ave-server --record-sync-ms`). What a crash may lose:
+  // the frames received since the last commit, at most this period plus one flush's duration;
+  // nothing acknowledged as recorded (SensorAck.recorded_sequence) is ever lost.
+  std::chrono::milliseconds flush_period{500};
+  // How a flush makes its segments' bytes durable before their rows are committed:
+  // kFilesystem: one syncfs(2) of the recording's filesystem when two or more segments on it have
+  // new bytes (the kernel's flusher writes them back, one device cache flush for all), else
+  // fdatasync; kPerFile: one fdatasync per segment with new bytes (50 cameras: 50 writebacks, 50
+  // inode writes and 50 cache flushes per flush). kFilesystem also waits for whatever else is
+  // dirty on that filesystem: on a disk shared with heavy writers, kPerFile bounds the flush time.
+  enum class SyncMethod { kFilesystem, kPerFile };
+  SyncMethod sync_method = SyncMethod::kFilesystem;
   std::chrono::milliseconds objects_period{500};     // fused objects recorded at most this often
   // The fused objects now (a SceneUpdate holding only objects, server time in server_time_ns);
   // called on the writer thread once per objects_period. Empty: objects are not recorded.
@@ -68,6 +82,7 @@ struct RecorderStats {
   uint64_t write_errors = 0;      // other I/O errors (frame skipped)
   uint64_t segments_deleted = 0;
   uint64_t commits = 0;
+  uint64_t syncs = 0;  // syncfs or fdatasync calls made to commit segment bytes
   int64_t queue_items = 0;
   int64_t bytes_on_disk = 0;  // committed segment bytes
   bool disk_full = false;
@@ -121,6 +136,7 @@ class Recorder {
     // writeback. What is left over is released when the segment's descriptor closes (CloseFd) or,
     // after a crash, by Open's repair.
     int64_t allocated = 0;
+    bool same_fs = false;  // on the record dir's filesystem: one syncfs covers it
     std::vector<std::shared_ptr<const v1::SensorFrame>> hold;
   };
   Recorder(RecorderOptions options, std::unique_ptr<RecordIndex> index);
@@ -128,6 +144,10 @@ class Recorder {
   void Loop();
   void WriteItem(Item& item);
   void FlushBatch();
+  // Makes the new bytes of the dirty segments durable (SyncMethod); on failure drops their
+  // batch's rows and bytes (a full disk stops recording).
+  void SyncSegments();
+  void SyncFailed(OpenSegment& seg, int err);
   // Writes a segment's pending frames (WriteItem places them); on failure truncates back and drops
   // their rows from the batch (counted as skipped for a full disk, else as write errors).
   void WritePending(OpenSegment& seg);
@@ -171,12 +191,15 @@ class Recorder {
   std::vector<SegmentRow> closed_pending_;  // closed since the last commit (their final rows)
   int64_t last_objects_ns_ = 0;
   bool reserve_ = true;  // false once fallocate says the filesystem cannot
+  int dir_fd_ = -1;      // the record dir, for syncfs
+  dev_t dir_dev_ = 0;
+  bool syncfs_ok_ = true;  // false once syncfs says the kernel cannot
   bool probe_ = false;  // while full: the next frame may try to write (set once per flush)
   int64_t last_retention_ns_ = 0;
 
   std::atomic<uint64_t> frames_recorded_{0}, bytes_recorded_{0}, sweeps_recorded_{0}, objects_recorded_{0};
   std::atomic<uint64_t> queue_drops_{0}, disk_full_skips_{0}, disk_full_events_{0}, write_errors_{0};
-  std::atomic<uint64_t> segments_deleted_{0}, commits_{0};
+  std::atomic<uint64_t> segments_deleted_{0}, commits_{0}, syncs_{0};
   std::atomic<int64_t> bytes_on_disk_{0};
   std::atomic<bool> disk_full_{false};
   std::thread thread_;

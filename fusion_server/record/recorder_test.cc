@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <thread>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -399,6 +400,53 @@ TEST(Recorder, FullQueueDropsAndCounts) {
   (*recorder)->Drain();
   const RecorderStats stats = (*recorder)->Stats();
   EXPECT_EQ(stats.frames_recorded + stats.queue_drops, 200u);
+}
+
+// Three cameras' new bytes in one flush: one syncfs of the recording's filesystem (the default)
+// instead of one fdatasync per segment; the index still matches the files either way.
+TEST(Recorder, OneSyncfsPerFlushForAllSegmentsOrOneFdatasyncEach) {
+  for (const auto method : {RecorderOptions::SyncMethod::kFilesystem, RecorderOptions::SyncMethod::kPerFile}) {
+    TempRecording rec;
+    RecorderOptions o = Options(rec);
+    o.flush_period = std::chrono::milliseconds(60'000);  // flushes only at Drain: one batch
+    o.sync_method = method;
+    auto recorder = Recorder::Open(rec.store_path(), o);
+    ASSERT_TRUE(recorder.ok()) << recorder.status();
+    for (int k = 1; k <= 6; ++k) {
+      (*recorder)->SubmitFrame("cam" + std::to_string(k % 3), TestFrame(k, 0, TestJpeg(k)), kT0 + k * kFrameNs,
+                               kT0 + k * kFrameNs);
+    }
+    (*recorder)->Drain();
+    const RecorderStats stats = (*recorder)->Stats();
+    EXPECT_EQ(stats.frames_recorded, 6u);
+    EXPECT_EQ(stats.syncs, method == RecorderOptions::SyncMethod::kFilesystem ? 1u : 3u);
+    std::string metrics;
+    (*recorder)->RenderPrometheus(metrics);
+    EXPECT_THAT(metrics, HasSubstr("ave_record_syncs_total " + std::to_string(stats.syncs)));
+    recorder->reset();
+    ExpectIndexMatchesSegments(rec.store_path(), rec.dir(), 160, 120);
+  }
+}
+
+// The sync period (--record-sync-ms) is when frames become durable and acknowledged as recorded:
+// with a minute's period nothing is committed until a drain (or the period) comes.
+TEST(Recorder, SyncPeriodDecidesWhenFramesAreCommitted) {
+  TempRecording rec;
+  RecorderOptions o = Options(rec);
+  o.flush_period = std::chrono::milliseconds(60'000);
+  auto recorder = Recorder::Open(rec.store_path(), o);
+  ASSERT_TRUE(recorder.ok());
+  for (int k = 1; k <= 3; ++k) (*recorder)->SubmitFrame("cam", TestFrame(k, 0, TestJpeg(k)), kT0 + k, kT0 + k);
+  std::this_thread::sleep_for(std::chrono::milliseconds(600));  // > the default period (500 ms)
+  EXPECT_EQ((*recorder)->Stats().commits, 0u);
+  EXPECT_EQ((*recorder)->RecordedSequence("cam", 0), 0u);
+  (*recorder)->Drain();
+  EXPECT_EQ((*recorder)->Stats().commits, 1u);
+  EXPECT_EQ((*recorder)->RecordedSequence("cam", 0), 3u);
+  o.flush_period = std::chrono::milliseconds(0);
+  EXPECT_THAT(o.Check(), HasSubstr("--record-sync-ms"));
+  o.flush_period = std::chrono::milliseconds(60'001);
+  EXPECT_THAT(o.Check(), HasSubstr("--record-sync-ms"));
 }
 
 TEST(Recorder, OptionsCheckNamesTheField) {

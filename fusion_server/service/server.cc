@@ -39,6 +39,7 @@ std::string ServerOptions::Check() const {
   if (!record_dir.empty() && store_path == ":memory:") return "--record-dir needs a store file (--store), not :memory:";
   if (record_retention.count() < 0) return "--retention must be >= 0 s";
   if (record_max_bytes < 0) return "--record-max-bytes must be >= 0";
+  if (record_sync_period.count() < 10 || record_sync_period.count() > 60'000) return "--record-sync-ms must be 10..60000";
   return {};
 }
 
@@ -106,6 +107,9 @@ absl::Status StartRecorder(FusionServer::Impl& impl) {
   ro.dir = impl.options.record_dir;
   ro.max_age = impl.options.record_retention;
   ro.max_bytes = impl.options.record_max_bytes;
+  ro.flush_period = impl.options.record_sync_period;
+  ro.sync_method = impl.options.record_sync_per_file ? record::RecorderOptions::SyncMethod::kPerFile
+                                                     : record::RecorderOptions::SyncMethod::kFilesystem;
   SceneState* state = &impl.state;
   ro.objects_source = [state] {
     ViewerCursor cursor;

@@ -56,6 +56,10 @@ struct ServerOptions {
   std::string record_dir;
   std::chrono::seconds record_retention{0};  // delete recordings older than this; 0 = keep
   int64_t record_max_bytes = 0;              // recording budget in bytes; 0 = the disk's size
+  // Write + sync + commit period of the recorder (--record-sync-ms): a crash may lose the frames
+  // received in the last period plus one flush; acknowledged frames are never lost.
+  std::chrono::milliseconds record_sync_period{500};
+  bool record_sync_per_file = false;  // --record-sync fdatasync: one fdatasync per segment, not one syncfs
 
   // Empty when usable, else names the bad field.
   std::string Check() const;
