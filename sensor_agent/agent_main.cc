@@ -1,5 +1,6 @@
 // ave-agent: a sensor node. Captures frames from a source and streams them to ave-server.
 //   ave-agent --camera cam1 --source sim:campus#cam1 --server 127.0.0.1:50051 --token T
+#include <chrono>
 #include <csignal>
 #include <cstdlib>
 #include <fstream>
@@ -270,13 +271,16 @@ int main(int argc, char** argv) {
   AVE_LOG(INFO) << "camera '" << options.camera_id << "': streaming " << (*source)->description() << " to "
                 << options.server << " at " << options.fps << " fps";
   ave::AgentStreamer streamer(options, std::move(*source));
+  const auto run_start = std::chrono::steady_clock::now();
   const absl::Status status = streamer.Run(g_stop);
+  const double run_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - run_start).count();
   const ave::AgentStats s = streamer.stats();
   std::cout << "{\"camera\":\"" << options.camera_id << "\",\"frames_sent\":" << s.frames_sent
             << ",\"frames_acked\":" << s.frames_acked << ",\"connects\":" << s.connects
             << ",\"bytes_sent\":" << s.bytes_sent << ",\"metadata_buffered\":" << s.metadata_buffered
             << ",\"metadata_replayed\":" << s.metadata_replayed << ",\"metadata_dropped\":" << s.metadata_dropped
-            << ",\"clock_offset_ms\":" << s.clock_offset_ns / 1e6 << "}" << std::endl;
+            << ",\"clock_offset_ms\":" << s.clock_offset_ns / 1e6 << ",\"seconds\":" << run_s
+            << ",\"frames_per_s\":" << (run_s > 0 ? s.frames_sent / run_s : 0.0) << "}" << std::endl;
   if (!status.ok()) {
     std::cerr << "ave-agent: " << status.message() << "\n";
     return 1;
