@@ -75,7 +75,11 @@ struct BuildingLook {
 
 // ---- Deterministic procedural noise ---------------------------------------------------------
 
-uint32_t Hash(int64_t x, int64_t y, uint32_t seed) {
+// The noise functions are forced inline: the shading of every pixel calls them up to 16 times
+// (issue 19, the backpack camera's render; the same operations, so the same bits).
+#define AVE_SIM_INLINE [[gnu::always_inline]] inline
+
+AVE_SIM_INLINE uint32_t Hash(int64_t x, int64_t y, uint32_t seed) {
   // Lattice coordinates folded with odd constants, then a xorshift-multiply finaliser
   // (wrapping arithmetic on purpose).
   uint32_t h = static_cast<uint32_t>(x) * 0x8da6b343u + static_cast<uint32_t>(y) * 0xd8163841u + seed * 0xcb1ab31fu;
@@ -87,10 +91,10 @@ uint32_t Hash(int64_t x, int64_t y, uint32_t seed) {
   return h;
 }
 
-float Hash01(int64_t x, int64_t y, uint32_t seed) { return static_cast<float>(Hash(x, y, seed) >> 8) * (1.0f / 16777216.0f); }
+AVE_SIM_INLINE float Hash01(int64_t x, int64_t y, uint32_t seed) { return static_cast<float>(Hash(x, y, seed) >> 8) * (1.0f / 16777216.0f); }
 
 // Value noise in [0, 1] with a C1 (smoothstep) blend; one lattice cell per unit of x, y.
-float ValueNoise(double x, double y, uint32_t seed) {
+AVE_SIM_INLINE float ValueNoise(double x, double y, uint32_t seed) {
   const double fx = std::floor(x), fy = std::floor(y);
   const auto ix = static_cast<int64_t>(fx), iy = static_cast<int64_t>(fy);
   const auto tx = static_cast<float>(x - fx), ty = static_cast<float>(y - fy);
@@ -107,7 +111,7 @@ float Resolved(double footprint_m, double wavelength_m) {
 }
 
 // Noise of `wavelength_m` at p, faded to its mean 0.5 where it would alias.
-float Octave(const Vector2d& p, double wavelength_m, uint32_t seed, double footprint_m) {
+AVE_SIM_INLINE float Octave(const Vector2d& p, double wavelength_m, uint32_t seed, double footprint_m) {
   const float r = Resolved(footprint_m, wavelength_m);
   if (r <= 0) return 0.5f;
   return 0.5f + r * (ValueNoise(p.x() / wavelength_m, p.y() / wavelength_m, seed) - 0.5f);
