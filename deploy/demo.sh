@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The main job: installs what is missing, builds, then runs the whole AVE loop on the bundled
-# synthetic campus: ave-server on an embedded SQLite store, the three campus cameras registered
-# through the admin API, three simulated camera agents, and a viewer — a window when DISPLAY is
+# synthetic campus: ave-server on an embedded SQLite store, the three campus cameras and the moving
+# backpack camera registered through the admin API, their simulated camera agents (the backpack's
+# with its GPS + inertial + vision pose at its full 30 Hz), and a viewer — a window when DISPLAY is
 # set, otherwise headless, writing a quad-view PNG — then stops everything cleanly.
 # Every channel uses TLS with a site CA made by deploy/make-certs.sh; the sensors also present
 # client certificates (mutual TLS) and each streams with its own camera-bound token issued through
@@ -31,7 +32,12 @@ certs=$out/certs
 # streams their foot tracks and points; the server fuses them with the cameras' objects.
 # AVE_DEMO_ROTATING_LIDAR=0 leaves it out.
 lidar_demo=${AVE_DEMO_ROTATING_LIDAR:-1}
+# Issue 19: the backpack walker's camera streams at its full rate (30 Hz, the scenario's) with the
+# pose fused from its GPS, inertial sensor and the video itself (--pose-mode gps-imu-vision).
+# AVE_DEMO_BACKPACK=0 leaves it out.
+backpack_demo=${AVE_DEMO_BACKPACK:-1}
 sensors="cam1 cam2 cam3"
+[ "$backpack_demo" = 1 ] && sensors="$sensors backpack"
 [ "$lidar_demo" = 1 ] && sensors="$sensors hdl"
 # shellcheck disable=SC2086
 bash "$root/deploy/make-certs.sh" "$certs" $sensors >/dev/null
@@ -75,7 +81,11 @@ done
 [ -n "$port" ] || { echo "demo: ave-server did not report its port" >&2; exit 1; }
 server=127.0.0.1:$port
 echo "demo: server on $server (TLS); registering the campus cameras"
-"$bin/ave-admin" --server "$server" import-campus
+if [ "$backpack_demo" = 1 ]; then
+  "$bin/ave-admin" --server "$server" import-campus --moving
+else
+  "$bin/ave-admin" --server "$server" import-campus
+fi
 
 # Issue 17: the people walk as 4D avatars reconstructed in the simulated 13+1-camera studio:
 # ave-sim studio renders it, ave-studio segments (shadows removed), carves the visual hull, meshes,
@@ -113,6 +123,14 @@ for cam in cam1 cam2 cam3; do
   pids+=("$!")
 done
 echo "demo: 3 simulated camera agents streaming, detecting and tracking moving objects"
+if [ "$backpack_demo" = 1 ]; then
+  bp_token=$("$bin/ave-admin" --server "$server" issue-token --role sensor --camera backpack --label "demo backpack" 2>/dev/null)
+  "$bin/ave-agent" --server "$server" --camera backpack --source "sim:campus#backpack" --fps "${AVE_DEMO_BACKPACK_FPS:-30}" \
+    --pose-mode gps-imu-vision --token "$bp_token" --tls-cert "$certs/sensor-backpack.pem" --tls-key "$certs/sensor-backpack.key" \
+    >"$out/agent-backpack.out" 2>"$out/agent-backpack.log" &
+  pids+=("$!")
+  echo "demo: the backpack camera's agent streaming at ${AVE_DEMO_BACKPACK_FPS:-30} Hz with its GPS + inertial + vision pose"
+fi
 if [ "$lidar_demo" = 1 ]; then
   # Registered like a camera (audited), with its own sensor-bound token. The position is the
   # scenario's (12, -14) at 2 m above the ground there; the simulated sweeps carry their own pose.

@@ -19,8 +19,8 @@ assert (w, h) == (1280, 720), f'quad view is {w}x{h}, expected 1280x720'
 print(f'quad.png {w}x{h}')
 PY
 n=$(grep -c '"id"' "$out/cameras.json")
-[ "$n" = 4 ] || { echo "FAIL: $n sensors registered (3 cameras and the LiDAR expected)"; exit 1; }
-for cam in cam1 cam2 cam3; do
+[ "$n" = 5 ] || { echo "FAIL: $n sensors registered (3 cameras, the backpack and the LiDAR expected)"; exit 1; }
+for cam in cam1 cam2 cam3 backpack; do
   grep -q "camera '$cam' connected" "$out/server.log" || { echo "FAIL: $cam never connected"; exit 1; }
 done
 # Issue 16: the rotating LiDAR's agent tracked people and the server took its sweeps.
@@ -37,6 +37,14 @@ frames=$(sed -n 's/^ave_frames_in_total \([0-9]*\)$/\1/p' "$out/metrics.txt" 2>/
 [ "${frames:-0}" -gt 0 ] || { echo "FAIL: metrics show no frames in (metrics.txt: $(head -c 200 "$out/metrics.txt" 2>/dev/null))"; exit 1; }
 sweeps=$(sed -n 's/^ave_lidar_sweeps_in_total \([0-9]*\)$/\1/p' "$out/metrics.txt" 2>/dev/null || true)
 [ "${sweeps:-0}" -gt 0 ] || { echo "FAIL: metrics show no LiDAR sweeps in"; exit 1; }
+# Issue 19: the backpack camera's agent streamed with its GPS + inertial + vision pose and said at
+# what rate (the figure itself is in docs/BENCHMARKS.md; a loaded test machine is not the place to
+# assert it).
+grep -q "backpack.*pose gps-imu-vision" "$out/agent-backpack.log" ||
+  { echo "FAIL: the backpack agent did not stream with --pose-mode gps-imu-vision ($(tail -3 "$out/agent-backpack.log"))"; exit 1; }
+bp_frames=$(sed -n 's/.*"frames_sent":\([0-9]*\).*"frames_per_s":\([0-9.e+-]*\).*/\1 \2/p' "$out/agent-backpack.out")
+[ "${bp_frames%% *}" -gt 0 ] 2>/dev/null || { echo "FAIL: the backpack agent sent no frames (agent-backpack.out: $(cat "$out/agent-backpack.out"))"; exit 1; }
+echo "backpack agent: frames sent and frames/s: $bp_frames"
 if pgrep -f "$out/ave.db" >/dev/null; then echo "FAIL: a demo process is still running"; exit 1; fi
 # The window path: the same viewer in a GLFW window under a virtual X display, closing itself after
 # a few frames and writing its last frame.

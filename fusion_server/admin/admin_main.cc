@@ -5,7 +5,8 @@
 //   ave-admin add-lidar --id hdl64 --position -2,-3,2.1 [--quaternion w,x,y,z | --yaw-deg 0]
 //   ave-admin update-lidar ... (same flags)
 //   ave-admin remove-camera --id cam9  (LiDARs too)
-//   ave-admin import-campus            (registers the built-in campus cameras, skipping existing ones)
+//   ave-admin import-campus [--moving] (registers the built-in campus cameras, skipping existing ones;
+//                                       --moving: also the scenario's moving cameras, e.g. the backpack)
 //   ave-admin issue-token --role sensor --camera cam1   (prints the new token once)
 //   ave-admin revoke-token --id 3f2a9c01b7e4 | list-tokens
 //   ave-admin export --camera cam1 --from T --to T2 --out clip.mkv   (recorded frames, issue 18)
@@ -114,7 +115,10 @@ int main(int argc, char** argv) {
   add_lidar_flags(update_lidar);
   CLI::App* remove = app.add_subcommand("remove-camera", "remove a camera or LiDAR");
   remove->add_option("--id", id, "camera id")->required();
-  app.add_subcommand("import-campus", "register the built-in campus cameras (existing ids are skipped)");
+  CLI::App* import_campus = app.add_subcommand("import-campus", "register the built-in campus cameras (existing ids are skipped)");
+  bool import_moving = false;
+  import_campus->add_flag("--moving", import_moving,
+                          "also the campus scenario's moving cameras (the backpack walker; its agent streams a pose per frame)");
   std::string role, label, token_id;
   CLI::App* issue = app.add_subcommand("issue-token", "issue a bearer token; prints it once (the server keeps its hash)");
   issue->add_option("--role", role, "sensor, viewer or admin")->required()->check(CLI::IsMember({"sensor", "viewer", "admin"}));
@@ -195,7 +199,11 @@ int main(int argc, char** argv) {
     auto existing = client.ListCameras();
     if (!existing.ok()) return Fail(std::string(existing.status().message()));
     int added = 0;
-    for (const auto& spec : ave::scene::BuiltinCampus().cameras) {
+    std::vector<ave::scene::CameraSpec> specs = ave::scene::BuiltinCampus().cameras;
+    if (import_moving) {
+      for (const auto& spec : ave::scene::BuiltinCampusMovingCameras()) specs.push_back(spec);
+    }
+    for (const auto& spec : specs) {
       bool present = false;
       for (const auto& c : *existing) present |= c.id() == spec.id;
       if (present) continue;

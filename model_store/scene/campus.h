@@ -177,6 +177,9 @@ struct SyntheticCampus {
 // with its fixed cameras only (the registry imports these; moving cameras come from the scenario
 // through the simulator). Deterministic; parsed once per process.
 SyntheticCampus BuiltinCampus();
+// The `campus` scenario's moving cameras (the backpack walker), which BuiltinCampus leaves out;
+// world_from_camera is the pose at t = 0. `ave-admin import-campus --moving` registers them.
+std::vector<CameraSpec> BuiltinCampusMovingCameras();
 
 // Static model: terrain grid at `grid_resolution_m` plus every building part, tree and static
 // object, coloured with the model's own neutral colours. Per triangle: material (walls kWall,

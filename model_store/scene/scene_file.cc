@@ -584,7 +584,9 @@ absl::StatusOr<ScenarioSource> ReadScenarioSource(const std::string& name_or_pat
   return ScenarioSource{ss.str(), path.filename().string()};
 }
 
-SyntheticCampus BuiltinCampus() {
+namespace {
+// The bundled campus scenario's site with every camera, parsed once per process.
+const SyntheticCampus& BundledCampusWithAllCameras() {
   static const SyntheticCampus* const campus = [] {
     auto parsed = LoadSceneText(std::string(*BundledScenarioText("campus")), "campus.yaml");
     if (!parsed.ok()) {
@@ -592,11 +594,27 @@ SyntheticCampus BuiltinCampus() {
       std::fprintf(stderr, "BuiltinCampus: %s\n", std::string(parsed.status().message()).c_str());
       std::abort();
     }
-    auto* c = new SyntheticCampus(std::move(*parsed));
+    return new SyntheticCampus(std::move(*parsed));
+  }();
+  return *campus;
+}
+}  // namespace
+
+SyntheticCampus BuiltinCampus() {
+  static const SyntheticCampus* const campus = [] {
+    auto* c = new SyntheticCampus(BundledCampusWithAllCameras());
     std::erase_if(c->cameras, [](const CameraSpec& cam) { return cam.path.has_value(); });
     return c;
   }();
   return *campus;
+}
+
+std::vector<CameraSpec> BuiltinCampusMovingCameras() {
+  std::vector<CameraSpec> moving;
+  for (const CameraSpec& cam : BundledCampusWithAllCameras().cameras) {
+    if (cam.path) moving.push_back(cam);
+  }
+  return moving;
 }
 
 }  // namespace ave::scene

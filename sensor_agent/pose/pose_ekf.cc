@@ -40,6 +40,7 @@ std::string PoseFilterOptions::Check() const {
   if (!positive(gps_min_sigma_m)) return "gps_min_sigma_m must be finite and > 0";
   if (!positive(orientation_sigma_deg)) return "orientation_sigma_deg must be finite and > 0";
   if (!(std::isfinite(orientation_correlation_s) && orientation_correlation_s >= 0)) return "orientation_correlation_s must be finite and >= 0";
+  if (!(std::isfinite(gyro_correlation_s) && gyro_correlation_s >= 0)) return "gyro_correlation_s must be finite and >= 0";
   if (!positive(gyro_sigma_rad_s)) return "gyro_sigma_rad_s must be finite and > 0";
   if (!positive(pixel_sigma_px)) return "pixel_sigma_px must be finite and > 0";
   if (!positive(gate_chi2_3dof) || !positive(gate_chi2_2dof)) return "gate_chi2_* must be finite and > 0";

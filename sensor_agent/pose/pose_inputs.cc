@@ -213,7 +213,10 @@ void PoseTracker::Apply(const ImuReading& s) {
   const double dt_s = previous_ns == INT64_MIN ? o.orientation_correlation_s : static_cast<double>(s.t_ns - previous_ns) * 1e-9;
   const double inflation = o.orientation_correlation_s > dt_s ? std::sqrt(o.orientation_correlation_s / dt_s) : 1.0;
   const UpdateResult r = ekf_.UpdateOrientation(s.orientation, inflation * o.orientation_sigma_deg * 3.14159265358979323846 / 180);
-  (void)ekf_.UpdateRate(s.gyro_rad_s, o.gyro_sigma_rad_s);
+  // The gyro's bias is correlated too (PoseFilterOptions::gyro_correlation_s).
+  const double gyro_dt_s = previous_ns == INT64_MIN ? o.gyro_correlation_s : dt_s;
+  const double gyro_inflation = o.gyro_correlation_s > gyro_dt_s ? std::sqrt(o.gyro_correlation_s / gyro_dt_s) : 1.0;
+  (void)ekf_.UpdateRate(s.gyro_rad_s, gyro_inflation * o.gyro_sigma_rad_s);
   stats_.imu_used += r.accepted();
   stats_.imu_gated += r.rejection == Rejection::kGate;
   stats_.not_finite += r.rejection == Rejection::kNotFinite;

@@ -562,12 +562,14 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
     }
     timer.Lap(kStageMatch);
     m.known.clear();
+    const double acquiring_var =
+        m.good_full_matches < m.options.lock_frames ? m.options.acquiring_sigma_px * m.options.acquiring_sigma_px : 0.0;
     for (const auto& [index, j] : matches) {
       const Eigen::Vector2d uv(corners[j].x, corners[j].y);
       stats.point_matches.emplace_back(m.map.points[index], uv);
       if (budget <= 0) continue;
       --budget;
-      const UpdateResult r = ekf.UpdatePoint(m.k, m.map.points[index], uv);
+      const UpdateResult r = ekf.UpdatePoint(m.k, m.map.points[index], uv, acquiring_var);
       Count(r, stats.points_used, stats);
       if (r.accepted()) m.known.push_back({index, frame_corners[j], frame_corners[j]});
     }
@@ -575,7 +577,7 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
     for (size_t i = 0; i < line_matches.size() && budget > 0; ++i) {
       if (!line_matches[i]) continue;
       --budget;
-      const UpdateResult r = ekf.UpdateLine(m.k, m.map.lines[i].line, line_matches[i]->a, line_matches[i]->b);
+      const UpdateResult r = ekf.UpdateLine(m.k, m.map.lines[i].line, line_matches[i]->a, line_matches[i]->b, acquiring_var);
       Count(r, stats.lines_used, stats);
       if (r.accepted()) m.known_lines.push_back(static_cast<int>(i));
     }

@@ -80,6 +80,10 @@ struct VisionOptions {
   double lost_orientation_sigma_deg = 1.0;  // ... by this orientation sigma (and 0.5 m of position sigma)
   int lock_frames = 15;           // tracking between keyframes only after this many consecutive well-fitting full matches
   double tracked_sigma_px = 1.5;  // extra noise of a tracked (not re-detected) feature: its error persists from frame to frame
+  // Extra noise of the full matching's features until the lock holds (fewer than lock_frames good
+  // fits in a row, issue 19): matched from an unconverged prediction, a frame's features share its
+  // association error (the coarse offset), which independent 1.5 px noise does not cover.
+  double acquiring_sigma_px = 0;
   int min_tracked_known = 8;      // fewer tracked known features than this: full matching now (weak lock)
   double weak_lock_gated_share = 0.25;
   double lock_sigma_px = 1.0;     // the pose's projected uncertainty at the tracked features above this (px, mean): full matching now  // more than this share of tracked known features outside the gate: full matching now

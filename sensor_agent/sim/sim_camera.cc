@@ -5,6 +5,8 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <memory>
+#include <mutex>
 #include <stdexcept>
 
 #include "sensor_agent/sim/camera_effects.h"
@@ -73,7 +75,11 @@ struct BuildingLook {
 
 // ---- Deterministic procedural noise ---------------------------------------------------------
 
-uint32_t Hash(int64_t x, int64_t y, uint32_t seed) {
+// The noise functions are forced inline: the shading of every pixel calls them up to 16 times
+// (issue 19, the backpack camera's render; the same operations, so the same bits).
+#define AVE_SIM_INLINE [[gnu::always_inline]] inline
+
+AVE_SIM_INLINE uint32_t Hash(int64_t x, int64_t y, uint32_t seed) {
   // Lattice coordinates folded with odd constants, then a xorshift-multiply finaliser
   // (wrapping arithmetic on purpose).
   uint32_t h = static_cast<uint32_t>(x) * 0x8da6b343u + static_cast<uint32_t>(y) * 0xd8163841u + seed * 0xcb1ab31fu;
@@ -85,10 +91,10 @@ uint32_t Hash(int64_t x, int64_t y, uint32_t seed) {
   return h;
 }
 
-float Hash01(int64_t x, int64_t y, uint32_t seed) { return static_cast<float>(Hash(x, y, seed) >> 8) * (1.0f / 16777216.0f); }
+AVE_SIM_INLINE float Hash01(int64_t x, int64_t y, uint32_t seed) { return static_cast<float>(Hash(x, y, seed) >> 8) * (1.0f / 16777216.0f); }
 
 // Value noise in [0, 1] with a C1 (smoothstep) blend; one lattice cell per unit of x, y.
-float ValueNoise(double x, double y, uint32_t seed) {
+AVE_SIM_INLINE float ValueNoise(double x, double y, uint32_t seed) {
   const double fx = std::floor(x), fy = std::floor(y);
   const auto ix = static_cast<int64_t>(fx), iy = static_cast<int64_t>(fy);
   const auto tx = static_cast<float>(x - fx), ty = static_cast<float>(y - fy);
@@ -105,7 +111,7 @@ float Resolved(double footprint_m, double wavelength_m) {
 }
 
 // Noise of `wavelength_m` at p, faded to its mean 0.5 where it would alias.
-float Octave(const Vector2d& p, double wavelength_m, uint32_t seed, double footprint_m) {
+AVE_SIM_INLINE float Octave(const Vector2d& p, double wavelength_m, uint32_t seed, double footprint_m) {
   const float r = Resolved(footprint_m, wavelength_m);
   if (r <= 0) return 0.5f;
   return 0.5f + r * (ValueNoise(p.x() / wavelength_m, p.y() / wavelength_m, seed) - 0.5f);
@@ -366,6 +372,29 @@ std::string RendererOptions::Check() const {
   return {};
 }
 
+namespace {
+
+// One view of a fixed camera: the image as the fixed static triangles alone leave it (depth and
+// triangle per pixel, and each pixel's shading once some frame has shaded it).
+struct StaticLayer {
+  PinholeIntrinsics k;
+  Rigid3d pose;
+  std::vector<float> depth;
+  std::vector<uint32_t> triangle;
+  std::vector<uint8_t> shaded;  // 1: bgr, object_id and class_id below hold the pixel's shading
+  std::vector<uint8_t> bgr;
+  std::vector<uint32_t> object_id;
+  std::vector<uint8_t> class_id;
+  std::mutex mu;  // one render at a time uses (and fills in) the layer
+};
+
+bool SameView(const PinholeIntrinsics& a, const Rigid3d& pa, const PinholeIntrinsics& b, const Rigid3d& pb) {
+  return a.width == b.width && a.height == b.height && a.fx == b.fx && a.fy == b.fy && a.cx == b.cx && a.cy == b.cy &&
+         pa.translation == pb.translation && pa.rotation.coeffs() == pb.rotation.coeffs();
+}
+
+}  // namespace
+
 struct CampusRenderer::Impl {
   scene::SyntheticCampus campus;
   Options options;
@@ -375,6 +404,13 @@ struct CampusRenderer::Impl {
   std::vector<Surface> surfaces;             // one per static triangle
   std::vector<BuildingLook> buildings;       // one per campus building
   std::vector<SwayingCrown> crowns;          // one per tree, into positions
+  // Triangles [0, fixed_triangles) and vertices [0, fixed_vertices) are the fixed static scene
+  // (no trees); the trees follow.
+  size_t fixed_triangles = 0, fixed_vertices = 0;
+  // reuse_static_layer: the last view rendered, and the layer of the view rendered twice in a row.
+  mutable std::mutex view_mu;
+  mutable std::optional<std::pair<PinholeIntrinsics, Rigid3d>> last_view;
+  mutable std::shared_ptr<StaticLayer> layer;
 };
 
 CampusRenderer::CampusRenderer(const scene::SyntheticCampus& campus, Options options) {
@@ -389,6 +425,8 @@ CampusRenderer::CampusRenderer(const scene::SyntheticCampus& campus, Options opt
   scene::SyntheticCampus bare = campus;
   bare.trees.clear();
   TriangleMesh mesh = scene::BuildStaticMesh(bare, options.terrain_resolution_m);
+  impl->fixed_triangles = mesh.TriangleCount();
+  impl->fixed_vertices = mesh.positions.size();
   for (size_t i = 0; i < campus.trees.size(); ++i) {
     const scene::Tree& tree = campus.trees[i];
     SwayingCrown crown;
@@ -470,15 +508,37 @@ SimImage CampusRenderer::Render(const PinholeIntrinsics& k, const Rigid3d& world
   image.depth_m.assign(pixels, std::numeric_limits<float>::infinity());
   std::vector<uint32_t> triangle(pixels, kNoTriangle);
 
+  // A fixed camera's second render of the same view keeps the fixed static scene (StaticLayer).
+  std::shared_ptr<StaticLayer> layer;
+  bool build_layer = false;
+  if (m.options.reuse_static_layer) {
+    std::lock_guard lock(m.view_mu);
+    if (m.layer && SameView(m.layer->k, m.layer->pose, k, world_from_camera)) {
+      layer = m.layer;
+    } else if (m.last_view && SameView(m.last_view->first, m.last_view->second, k, world_from_camera)) {
+      build_layer = true;
+    }
+    m.last_view = std::make_pair(k, world_from_camera);
+  }
+  std::unique_lock<std::mutex> layer_lock;
+  if (layer) {
+    layer_lock = std::unique_lock(layer->mu);
+    image.depth_m = layer->depth;
+    triangle = layer->triangle;
+  }
+
   const Eigen::Matrix3d world_from_camera_rot = world_from_camera.rotation.toRotationMatrix();
   const Eigen::Matrix3d camera_from_world_rot = world_from_camera_rot.transpose();
   const Vector3d camera_in_world = world_from_camera.translation;
   const Vector3d camera_from_world_t = -(camera_from_world_rot * camera_in_world);
 
-  // Static triangles first (ids 0..n-1), then this frame's movers (ids n..).
+  // Static triangles first (ids 0..n-1: the fixed scene, then the trees), then this frame's movers
+  // (ids n..). With a layer the fixed scene is already in the buffers.
   Rasterizer raster(k, m.options.near_m, image.depth_m.data(), triangle.data());
   std::vector<Vector3d> v_cam(m.positions.size());
-  for (size_t i = 0; i < m.positions.size(); ++i) v_cam[i] = camera_from_world_rot * m.positions[i].cast<double>() + camera_from_world_t;
+  for (size_t i = layer ? m.fixed_vertices : 0; i < m.positions.size(); ++i) {
+    v_cam[i] = camera_from_world_rot * m.positions[i].cast<double>() + camera_from_world_t;
+  }
   if (m.options.waving_vegetation && !m.crowns.empty()) {
     const auto sway_start = std::chrono::steady_clock::now();
     std::vector<Eigen::Vector3f> swayed = m.positions;
@@ -491,9 +551,26 @@ SimImage CampusRenderer::Render(const PinholeIntrinsics& k, const Rigid3d& world
     if (stats) stats->waving_vegetation_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - sway_start).count();
   }
   const size_t n_static = m.surfaces.size();
-  for (size_t t = 0; t < n_static; ++t) {
-    raster.Draw(v_cam[m.indices[3 * t]], v_cam[m.indices[3 * t + 1]], v_cam[m.indices[3 * t + 2]], static_cast<uint32_t>(t));
+  auto draw_static = [&](size_t begin, size_t end) {
+    for (size_t t = begin; t < end; ++t) {
+      raster.Draw(v_cam[m.indices[3 * t]], v_cam[m.indices[3 * t + 1]], v_cam[m.indices[3 * t + 2]], static_cast<uint32_t>(t));
+    }
+  };
+  if (!layer) draw_static(0, m.fixed_triangles);
+  if (build_layer) {
+    auto fresh = std::make_shared<StaticLayer>();
+    fresh->k = k;
+    fresh->pose = world_from_camera;
+    fresh->depth = image.depth_m;
+    fresh->triangle = triangle;
+    fresh->shaded.assign(pixels, 0);
+    fresh->bgr.resize(3 * pixels);
+    fresh->object_id.resize(pixels);
+    fresh->class_id.resize(pixels);
+    layer = std::move(fresh);
+    layer_lock = std::unique_lock(layer->mu);
   }
+  draw_static(m.fixed_triangles, n_static);
   TriangleMesh movers;
   std::vector<Surface> mover_surfaces;
   if (m.options.draw_movers) {
@@ -506,16 +583,24 @@ SimImage CampusRenderer::Render(const PinholeIntrinsics& k, const Rigid3d& world
   }
 
   // Shading: the surface point is the pixel's ray scaled by the interpolated depth, i.e. the
-  // perspective-correct local-frame position; textures are functions of that position.
+  // perspective-correct local-frame position; textures are functions of that position. A pixel
+  // that still shows the layer's fixed scene (or sky) takes the layer's shading once known.
   const Vector3f sun = m.sun;
   for (int y = 0; y < h; ++y) {
     const double yn = (y - k.cy) / k.fy;
     for (int x = 0; x < w; ++x) {
       const size_t i = static_cast<size_t>(y) * w + x;
+      const uint32_t tri = triangle[i];
+      const bool fixed_pixel = layer && layer->triangle[i] == tri;
+      if (fixed_pixel && layer->shaded[i]) {
+        for (int c = 0; c < 3; ++c) image.bgr[3 * i + c] = layer->bgr[3 * i + c];
+        image.object_id[i] = layer->object_id[i];
+        image.class_id[i] = layer->class_id[i];
+        continue;
+      }
       const double xn = (x - k.cx) / k.fx;
       const Vector3d ray_in_world = world_from_camera_rot * Vector3d(xn, yn, 1.0);  // z_cam = 1
       Vector3f rgb(0, 0, 0);
-      const uint32_t tri = triangle[i];
       if (tri == kNoTriangle) {
         rgb = Sky(ray_in_world);
       } else {
@@ -543,7 +628,17 @@ SimImage CampusRenderer::Render(const PinholeIntrinsics& k, const Rigid3d& world
       for (int c = 0; c < 3; ++c) {
         image.bgr[3 * i + c] = static_cast<uint8_t>(255.0f * std::clamp(rgb[2 - c], 0.0f, 1.0f) + 0.5f);
       }
+      if (fixed_pixel) {
+        for (int c = 0; c < 3; ++c) layer->bgr[3 * i + c] = image.bgr[3 * i + c];
+        layer->object_id[i] = image.object_id[i];
+        layer->class_id[i] = image.class_id[i];
+        layer->shaded[i] = 1;
+      }
     }
+  }
+  if (build_layer) {
+    std::lock_guard lock(m.view_mu);
+    m.layer = layer;
   }
   return image;
 }

@@ -84,6 +84,12 @@ struct RendererOptions {
   // Set: tree crowns sway with time (the waving_vegetation effect, camera_effects.h). Unset, the
   // effect's code never runs.
   std::optional<EffectParams> waving_vegetation;
+  // A camera that renders the same view twice in a row (a fixed camera) keeps the raster and the
+  // shading of the fixed static scene (terrain, roads, buildings, objects: everything but trees
+  // and movers, which are drawn every frame) and from then on draws and shades only the trees,
+  // the movers and the pixels they cover or uncover. Bit-identical to rendering everything (the
+  // fixed triangles come first in the draw order and their shading does not depend on time).
+  bool reuse_static_layer = true;
 
   // Empty when usable; otherwise names the first bad field.
   std::string Check() const;

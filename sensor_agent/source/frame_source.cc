@@ -1,6 +1,7 @@
 #include "sensor_agent/source/frame_source.h"
 
 #include <chrono>
+#include <future>
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
@@ -29,9 +30,24 @@ class SimScenarioSource final : public FrameSource {
         camera_(scenario.world, camera, scenario.EffectsForCamera(camera.id), scenario.seed),
         options_(options) {}
 
+  ~SimScenarioSource() override {
+    if (ahead_.valid()) ahead_.wait();
+  }
+
   absl::StatusOr<CapturedFrame> Next() override {
+    if (!options_.sim_render_ahead) return Render(index_++);
+    absl::StatusOr<CapturedFrame> frame = ahead_.valid() ? ahead_.get() : Render(index_++);
+    // The next frame renders while the caller works on this one (one Frame() at a time).
+    ahead_ = std::async(std::launch::async, [this, index = index_++] { return Render(index); });
+    return frame;
+  }
+  PinholeIntrinsics intrinsics() const override { return camera_.camera().intrinsics; }
+  std::string description() const override { return "simulated " + scenario_name_ + " camera " + camera_.camera().id; }
+  bool live() const override { return false; }
+
+ private:
+  absl::StatusOr<CapturedFrame> Render(int64_t index) const {
     CapturedFrame frame;
-    const int64_t index = index_++;
     frame.scene_time_s = options_.sim_start_s + static_cast<double>(index) / options_.fps;
     frame.capture_time_ns = WallNs();
     sim::SimImage image = camera_.Frame(index, frame.scene_time_s);
@@ -42,15 +58,12 @@ class SimScenarioSource final : public FrameSource {
     frame.world_from_camera = camera_.PoseAt(frame.scene_time_s);
     return frame;
   }
-  PinholeIntrinsics intrinsics() const override { return camera_.camera().intrinsics; }
-  std::string description() const override { return "simulated " + scenario_name_ + " camera " + camera_.camera().id; }
-  bool live() const override { return false; }
 
- private:
   std::string scenario_name_;
   sim::SimulatedCamera camera_;
   SourceOptions options_;
   int64_t index_ = 0;
+  std::future<absl::StatusOr<CapturedFrame>> ahead_;  // sim_render_ahead: the next frame
 };
 
 class VideoCaptureSource final : public FrameSource {

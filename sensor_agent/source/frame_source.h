@@ -56,6 +56,11 @@ struct SourceOptions {
   // frame with `default_fov_deg`.
   PinholeIntrinsics intrinsics;
   double default_fov_deg = 60;
+  // Sim sources: render the next frame on a thread of its own while the caller processes this one,
+  // as a real camera exposes the next frame while the agent encodes the last (issue 19: the
+  // backpack camera's render alone takes most of a 30 Hz frame's time). Costs no extra CPU per
+  // frame; one frame is rendered ahead of need.
+  bool sim_render_ahead = false;
 };
 
 absl::StatusOr<std::unique_ptr<FrameSource>> OpenSource(const std::string& spec, const SourceOptions& options);

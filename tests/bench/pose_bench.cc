@@ -53,9 +53,13 @@ struct PoseBenchOptions {
   std::string png = "pose_bench.png";
   bool lines = true, new_points = true;
   double ahrs_correlation_s = 1.0;  // PoseFilterOptions::orientation_correlation_s
+  double gyro_correlation_s = pose::PoseFilterOptions{}.gyro_correlation_s;  // issue 19
+  double acquiring_sigma_px = pose::VisionOptions{}.acquiring_sigma_px;  // issue 19
+  double gyro_sigma_rad_s = pose::PoseFilterOptions{}.gyro_sigma_rad_s;
   bool knobs = true;     // the front end's knobs at 50 features
   bool variants = true;  // the bus and bump scenario variants (need --seconds >= 7.2)
   bool consistency_knobs = true;  // the filter's noise model (pixel sigma, process noise) against NEES
+  std::string nees_csv;  // per-frame NEES diagnostics of every row (issue 19: which axes, where)
 };
 
 struct Spread {
@@ -295,6 +299,10 @@ int RunPose(const PoseBenchOptions& o) {
     std::function<void(pose::PoseFilterOptions&)> filter_tweak = nullptr;
   };
   const Event bus{"bus", 3.0, 6.0}, bump{"bump", 5.0, 5.2};
+  std::FILE* nees_csv = o.nees_csv.empty() ? nullptr : std::fopen(o.nees_csv.c_str(), "w");
+  if (nees_csv) {
+    std::fprintf(nees_csv, "row,t_s,keyframe,nees,nees_pos,nees_rot,dx,sx,dy,sy,dz,sz,dpitch,spitch,dyaw,syaw,droll,sroll,median_px\n");
+  }
   std::vector<Run> runs;
   for (int features : o.features) runs.push_back({features, "", features == 0 ? "gps_imu" : "gps_imu_vision_" + std::to_string(features), nullptr});
   auto add = [&](const std::string& knob, const std::string& key, std::function<void(pose::VisionOptions&)> tweak, const Event* e = nullptr) {
@@ -367,10 +375,13 @@ int RunPose(const PoseBenchOptions& o) {
     row.event = run.event;
     pose::PoseFilterOptions fo;
     fo.orientation_correlation_s = o.ahrs_correlation_s;
+    fo.gyro_correlation_s = o.gyro_correlation_s;
+    fo.gyro_sigma_rad_s = o.gyro_sigma_rad_s;
     if (run.filter_tweak) run.filter_tweak(fo);
     pose::PoseTracker tracker(log, fo);
     pose::VisionOptions vo;
     vo.max_features = run.features;
+    vo.acquiring_sigma_px = o.acquiring_sigma_px;
     vo.use_lines = o.lines;
     vo.use_new_points = o.new_points;
     if (run.tweak) run.tweak(vo);
@@ -393,6 +404,7 @@ int RunPose(const PoseBenchOptions& o) {
       row.filter_ms += filter_ms;
       if (!prior.valid) continue;
       double frame_ms = filter_ms;
+      bool vision_keyframe = false;
       if (run.features > 0) {
         const pose::VisionFrameStats s = vision.Update(frame->bgr.data(), frame->width, frame->height, tracker.filter());
         row.detect_ms += s.detect_ms;
@@ -401,6 +413,7 @@ int RunPose(const PoseBenchOptions& o) {
         row.used += s.features_used();
         for (int st = 0; st < pose::kVisionStageCount; ++st) row.stage_ms[st] += s.stage_ms[st];
         row.keyframes += s.keyframe;
+        vision_keyframe = s.keyframe;
         row.weak_locks += s.weak_lock;
         row.relocks += s.relocks;
         row.rejected_gate += s.rejected_gate, row.rejected_behind += s.rejected_behind, row.rejected_not_finite += s.rejected_not_finite;
@@ -468,6 +481,22 @@ int RunPose(const PoseBenchOptions& o) {
       const pose::PoseSample current = tracker.Current();
       Misregistration(k, frame_truth, current.world_from_camera, seen, row.errors_px, &row.frame_median_px);
       const double nees = PoseNees(frame_truth, current);
+      if (nees_csv) {
+        // Errors truth - estimate, position (world, m) and rotation vector in the *camera* frame
+        // (x right, y down, z forward: pitch, yaw, roll), each with its sigma and the 3-dof NEES
+        // of each block.
+        const Eigen::Vector3d dp = frame_truth.translation - current.world_from_camera.translation;
+        const Eigen::Vector3d dth_w = pose::SO3Log(frame_truth.rotation * current.world_from_camera.rotation.conjugate());
+        const Eigen::Matrix3d r_cw = current.world_from_camera.rotation.toRotationMatrix().transpose();
+        const Eigen::Vector3d dth_c = r_cw * dth_w;
+        const Eigen::Matrix3d p_pos = current.covariance.topLeftCorner<3, 3>();
+        const Eigen::Matrix3d p_rot_c = r_cw * current.covariance.bottomRightCorner<3, 3>() * r_cw.transpose();
+        const double nees_pos = dp.dot(p_pos.ldlt().solve(dp)), nees_rot = dth_c.dot(p_rot_c.ldlt().solve(dth_c));
+        std::fprintf(nees_csv, "%s,%.4f,%d,%.4f,%.4f,%.4f", run.key.c_str(), t_s, static_cast<int>(vision_keyframe), nees, nees_pos, nees_rot);
+        for (int i = 0; i < 3; ++i) std::fprintf(nees_csv, ",%.5f,%.5f", dp[i], std::sqrt(p_pos(i, i)));
+        for (int i = 0; i < 3; ++i) std::fprintf(nees_csv, ",%.6f,%.6f", dth_c[i], std::sqrt(p_rot_c(i, i)));
+        std::fprintf(nees_csv, ",%.4f\n", row.frame_median_px.empty() ? -1.0 : row.frame_median_px.back());
+      }
       ++row.nees_frames;
       row.nees_in_band += nees >= kNeesLow && nees <= kNeesHigh;
       row.nees_below += nees < kNeesLow;
@@ -615,6 +644,7 @@ int RunPose(const PoseBenchOptions& o) {
   std::snprintf(buf, sizeof(buf), ",\"one_deg_px\":{\"pitch\":%.2f,\"yaw\":%.2f,\"roll\":%.2f,\"pitch_fx%.0f\":%.2f,\"yaw_fx%.0f\":%.2f}", p, y, r,
                 k2.fx, p2, k2.fx, y2);
   json << buf << ",\"ekf_update_50_features_ms\":" << ekf50_ms << ",\"render_ms\":" << render_ms << ",\"png\":\"" << o.png << "\"}";
+  if (nees_csv) std::fclose(nees_csv);
   if (!o.png.empty()) Plot(rows, o.png, o.seconds);
   std::cout << json.str() << std::endl;
   return 0;
@@ -631,6 +661,15 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--lines", o->lines, "use known 3D line features")->capture_default_str();
   sub.add_option("--new-points", o->new_points, "track and triangulate unknown point features (and add the row where they correct the pose)")
       ->capture_default_str();
+  sub.add_option("--acquiring-sigma", o->acquiring_sigma_px, "extra pixel noise of full matchings until the lock holds (issue 19)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 100.0));
+  sub.add_option("--gyro-sigma", o->gyro_sigma_rad_s, "gyro rate sigma, rad/s (PoseFilterOptions::gyro_sigma_rad_s)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(1e-6, 10.0));
+  sub.add_option("--gyro-correlation", o->gyro_correlation_s, "seconds over which gyro errors (bias) are correlated (0: white, before issue 19's NEES fix)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0, 1e6));
   sub.add_option("--ahrs-correlation", o->ahrs_correlation_s, "seconds over which AHRS errors are correlated (0: white, the issue-5 filter)")
       ->capture_default_str()
       ->check(ave::cli::Range(0, 1e6));
@@ -638,6 +677,8 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--knobs", o->knobs, "rows for the video-rate front end's knobs (keyframe interval, visibility cache, detection level)")
       ->capture_default_str();
   sub.add_option("--variants", o->variants, "rows for the bus and 5-degree-bump scenario variants (need --seconds >= 7.2)")->capture_default_str();
+  sub.add_option("--nees-csv", o->nees_csv, "write per-frame NEES diagnostics of every row (axes, sigmas) to this CSV")
+      ->check(ave::cli::WritableFile());
   sub.add_option("--png", o->png, "plot to write (empty: none)")->capture_default_str()->check(ave::cli::WritableFile());
   return [o] { return RunPose(*o); };
 }
