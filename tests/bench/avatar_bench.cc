@@ -276,11 +276,12 @@ int Run(const AvatarBenchOptions& o, ViewerAvatarCost* out = nullptr) {
               per_100, per_100_cylinders, o.png.c_str());
   std::printf("{\"bench\":\"avatars\",\"width\":%d,\"height\":%d,\"frames\":%d", o.width, o.height, o.frames);
   for (size_t i = 0; i < counts.size(); ++i) {
-    std::printf(",\"ms_%d_avatars\":%.3f,\"ms_%d_cylinders\":%.3f", counts[i], with_avatars[i].wall_ms, counts[i],
-                with_cylinders[i].wall_ms);
+    std::printf(",\"ms_%d_avatars\":%s,\"ms_%d_cylinders\":%s", counts[i], JsonNumber(with_avatars[i].wall_ms).c_str(),
+                counts[i], JsonNumber(with_cylinders[i].wall_ms).c_str());
   }
-  std::printf(",\"viewer_ms_per_100_avatars\":%.3f,\"viewer_ms_per_100_cylinders\":%.3f,\"viewer_cpu_ms_per_100_avatars\":%.3f}\n",
-              per_100, per_100_cylinders, cpu_per_100);
+  // null where --counts lacks 0 or 100.
+  std::printf(",\"viewer_ms_per_100_avatars\":%s,\"viewer_ms_per_100_cylinders\":%s,\"viewer_cpu_ms_per_100_avatars\":%s}\n",
+              JsonNumber(per_100).c_str(), JsonNumber(per_100_cylinders).c_str(), JsonNumber(cpu_per_100).c_str());
   return 0;
 }
 

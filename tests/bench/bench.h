@@ -2,6 +2,7 @@
 // Shared pieces of ave-bench subcommands: a subcommand adds its options to its CLI11 app and
 // returns the function that runs it (after parsing).
 #include <cmath>
+#include <cstdio>
 #include <functional>
 #include <string>
 
@@ -10,6 +11,14 @@
 #include "model_store/common/cli.h"
 
 namespace ave::bench {
+
+// A number for a JSON summary line ("%.3f"), or null where it was not measured (NaN, inf).
+inline std::string JsonNumber(double v) {
+  if (!std::isfinite(v)) return "null";
+  char text[64];
+  std::snprintf(text, sizeof(text), "%.3f", v);
+  return text;
+}
 
 using Runner = std::function<int()>;
 

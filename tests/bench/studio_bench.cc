@@ -494,7 +494,7 @@ int RunStudio(const StudioBenchOptions& o) {
   }
   if (!main10) return 0;
   // JSON numbers, or null where the viewer's figures were skipped (--no-avatars) or failed.
-  auto number = [](double v) { return std::isfinite(v) ? cv::format("%.3f", v) : std::string("null"); };
+  const auto number = JsonNumber;
   std::printf("{\"bench\": \"studio\", \"voxel_mm\": 10, \"volume_iou\": %.4f, \"chamfer_mm\": %.2f, \"ms_per_frameset\": %.1f, "
               "\"texture_err_levels\": %.1f, \"silhouette_iou\": %.4f, \"silhouette_iou_no_shadow_removal\": %.4f, \"triangles\": %.0f, "
               "\"volume_iou_strict\": %.4f, \"chamfer_mm_strict\": %.2f, \"viewer_ms_0_avatars\": %s, \"viewer_ms_100_avatars\": %s, "
