@@ -58,6 +58,11 @@ struct Options {
   int64_t max_drops = -1;    // fail (exit 1) when exceeded; -1 = no check
   double max_p99_ms = 0;     // fail when exceeded; 0 = no check
   double min_received_ratio = 0;  // fail when viewers got less than this share of frames sent
+  // Fail when a viewer's frames neither received nor counted as skipped by the server exceed this
+  // many per stream (-1 = no check): the latest-frame policy may skip frames for a slow viewer,
+  // but must count each one; at the end a camera may still hold one unsent frame (and the skip
+  // it replaced) when the viewer stops, hence 2.
+  int64_t max_unaccounted_per_stream = -1;
   int quality = 80;
 };
 
@@ -271,6 +276,8 @@ int main(int argc, char** argv) {
   app.add_option("--plot", o.plot, "PNG plot over time")->capture_default_str()->check(ave::cli::WritableFile());
   app.add_option("--max-drops", o.max_drops, "exit 1 if viewers skipped more frames than this (-1 = no check)");
   app.add_option("--max-p99-ms", o.max_p99_ms, "exit 1 if p99 latency exceeds this (0 = no check)")->check(ave::cli::Range(0.0, 1e9));
+  app.add_option("--max-unaccounted-per-stream", o.max_unaccounted_per_stream,
+                 "exit 1 if a viewer's frames neither received nor counted as skipped exceed this per stream (-1 = no check)");
   app.add_option("--min-received-ratio", o.min_received_ratio,
                  "exit 1 if a viewer received less than this share of the frames sent (0 = no check)")
       ->check(ave::cli::Range(0.0, 1.0));
@@ -587,9 +594,11 @@ int main(int argc, char** argv) {
   uint64_t drops = 0;
   std::string viewer_error;
   double min_ratio = 1e9;
+  int64_t max_unaccounted = 0;  // over the viewers: frames sent - received - skipped
   for (const auto& r : viewer_results) {
     received += r.received;
     drops += r.skipped;
+    max_unaccounted = std::max(max_unaccounted, frames_sent.load() - r.received - static_cast<int64_t>(r.skipped));
     if (!r.error.empty()) viewer_error = r.error;
     min_ratio = std::min(min_ratio, frames_sent.load() > 0 ? double(r.received) / frames_sent.load() : 0.0);
   }
@@ -622,11 +631,11 @@ int main(int argc, char** argv) {
   char json[1024];
   std::snprintf(json, sizeof json,
                 "{\"streams\":%d,\"viewers\":%d,\"size\":\"%s\",\"duration_s\":%.1f,\"fps_sent\":%.1f,"
-                "\"fps_received\":%.1f,\"drops\":%llu,\"p50_ms\":%.2f,\"p95_ms\":%.2f,\"p99_ms\":%.2f,"
+                "\"fps_received\":%.1f,\"drops\":%llu,\"unaccounted\":%lld,\"p50_ms\":%.2f,\"p95_ms\":%.2f,\"p99_ms\":%.2f,"
                 "\"server_cpu_pct\":%.1f,\"server_cpu_pct_per_stream\":%.2f,\"server_peak_rss_mb\":%.1f,"
                 "\"poses_per_s\":%.1f,\"agent_errors\":%lld,\"min_hint_fps\":%.1f}",
                 o.streams, o.viewers, o.size.c_str(), duration, fps_sent, fps_received,
-                static_cast<unsigned long long>(drops), p50, p95, p99, cpu_pct, cpu_pct / o.streams, peak_rss,
+                static_cast<unsigned long long>(drops), static_cast<long long>(max_unaccounted), p50, p95, p99, cpu_pct, cpu_pct / o.streams, peak_rss,
                 (frames_sent.load() + poses_sent.load()) / duration, static_cast<long long>(agent_errors.load()),
                 hint_min_fps.load() > 1e8 ? 0.0 : hint_min_fps.load());
   std::cout << json << std::endl;
@@ -635,6 +644,11 @@ int main(int argc, char** argv) {
   if (agent_errors.load() > 0 || !viewer_error.empty()) rc = 1;
   if (o.max_drops >= 0 && static_cast<int64_t>(drops) > o.max_drops) {
     std::cerr << "ave-loadgen: FAIL " << drops << " drops > " << o.max_drops << "\n";
+    rc = 1;
+  }
+  if (o.max_unaccounted_per_stream >= 0 && o.viewers > 0 && max_unaccounted > o.max_unaccounted_per_stream * o.streams) {
+    std::cerr << "ave-loadgen: FAIL a viewer neither received nor was told of " << max_unaccounted << " of "
+              << frames_sent.load() << " frames (at most " << o.max_unaccounted_per_stream << " per stream)\n";
     rc = 1;
   }
   if (o.max_p99_ms > 0 && p99 > o.max_p99_ms) {
