@@ -196,7 +196,7 @@ absl::Status ValidateLidarSweep(const v1::LidarSweepFrame& sweep, uint64_t last_
   std::vector<uint32_t> ids;
   ids.reserve(sweep.tracks_size());
   constexpr double kMaxCoordinateM = 1e7;  // the local frame is site-sized; this only bounds the sums
-  constexpr float kMaxSpeedMps = 100;
+  constexpr float kMaxSpeedMps = kMaxTrackSpeedMps;
   for (int i = 0; i < sweep.tracks_size(); ++i) {
     const v1::FootTrack& t = sweep.tracks(i);
     const std::string field = absl::StrCat("tracks[", i, "]");

@@ -48,6 +48,10 @@ absl::Status ValidatePose(const v1::Pose& pose, const std::string& field);
 absl::Status ValidateFrame(const v1::SensorFrame& frame, const v1::Intrinsics& intrinsics, uint64_t last_sequence,
                            const FrameLimits& limits);
 
+// The fastest foot track a LiDAR sweep may carry (m/s): agents leave out a track over it rather
+// than send a sweep the server refuses whole.
+inline constexpr float kMaxTrackSpeedMps = 100;
+
 // One sweep of a rotating LiDAR's stream (issue 16). Same sequence, time and offset rules as
 // ValidateFrame; world_from_sensor as ValidatePose; every track with an id > 0 unique in the sweep,
 // a finite position within 1e7 m of the local origin, a finite velocity under 100 m/s, a

@@ -11,6 +11,7 @@
 #include "absl/strings/str_cat.h"
 #include "ave/v1/ave.grpc.pb.h"
 #include "fusion_server/core/convert.h"
+#include "fusion_server/core/validation.h"
 #include "model_store/common/log.h"
 #include "sensor_agent/stream/link.h"
 #include "sensor_agent/stream/agent_streamer.h"
@@ -69,7 +70,10 @@ v1::LidarSweepFrame SweepToWire(const lidar::LidarSweep& sweep, const lidar::Foo
     const Eigen::Vector2d v = j * t.velocity_mps;
     Eigen::Matrix2d c = j * t.covariance_m2 * j.transpose();
     c = 0.5 * (c + c.transpose()).eval();
-    if (!p.allFinite() || !v.allFinite() || !c.allFinite()) continue;  // the server would refuse the sweep
+    // The server would refuse the whole sweep: a non-finite track, or a velocity over its limit (a
+    // tracker's estimate from two sweeps very close in time), is left out of this sweep instead.
+    if (!p.allFinite() || !v.allFinite() || !c.allFinite()) continue;
+    if (std::hypot(static_cast<float>(v.x()), static_cast<float>(v.y())) > kMaxTrackSpeedMps) continue;
     v1::FootTrack* w = out.add_tracks();
     w->set_track_id(t.id);
     w->mutable_position()->set_x(p.x());

@@ -122,6 +122,23 @@ TEST(SweepToWire, NonFiniteTracksAreLeftOutNotSentToBeRefused) {
   EXPECT_EQ(SweepToWire(TwoPointSweep(), tracks, true, 10).tracks_size(), 0);
 }
 
+TEST(SweepToWire, ATrackFasterThanTheServerTakesIsLeftOutAndTheOthersSent) {
+  lidar::FootTracks tracks;
+  lidar::FootTrack fast, walking;
+  fast.id = 3;
+  fast.xy_m = Eigen::Vector2d(4, 0);
+  fast.velocity_mps = Eigen::Vector2d(0.01 / 50e-6, 0);  // 1 cm in 50 us: two sweeps stamped almost together
+  fast.confirmed = true;
+  walking = fast;
+  walking.id = 4;
+  walking.velocity_mps = Eigen::Vector2d(1.3, 0);
+  tracks.tracks = {fast, walking};
+  const v1::LidarSweepFrame wire = SweepToWire(TwoPointSweep(), tracks, true, 10);
+  ASSERT_EQ(wire.tracks_size(), 1);
+  EXPECT_EQ(wire.tracks(0).track_id(), 4u);
+  EXPECT_FLOAT_EQ(wire.tracks(0).velocity_x_mps(), 1.3f);
+}
+
 // The simulator's courtyard LiDAR through the truth fixture: the people in range, labelled points.
 TEST(LidarFixtures, CourtyardSweepHasPeopleAndTheirLabelledPoints) {
   auto scenario = sim::LoadScenario("courtyard");
@@ -175,13 +192,16 @@ class LidarStreamerFaults : public ::testing::Test {
   int port_ = 0;
 };
 
-// A walker 4 m east of the sensor, one sweep every call; the tracker is the truth fixture.
+// A walker 4 m east of the sensor going east at 0.5 m/s, one sweep every call; the tracker is the
+// truth fixture. Its position is a function of the sweep's time, as a person's is: a fixed step per
+// call made two calls close in time (the streamer's pacing catches up after a stall) a walker at
+// over 100 m/s, a velocity the server refuses.
 SweepSource WalkerSweeps() {
-  auto k = std::make_shared<int>(0);
-  return [k]() -> absl::StatusOr<lidar::LidarSweep> {
+  const int64_t t0 = NowNs();
+  return [t0]() -> absl::StatusOr<lidar::LidarSweep> {
     lidar::LidarSweep sweep;
     sweep.t_ns = NowNs();
-    sweep.truth_feet_in_world = {{7, Eigen::Vector3d(4 + 0.01 * (*k)++, 0, 0)}};
+    sweep.truth_feet_in_world = {{7, Eigen::Vector3d(4 + 0.5 * (sweep.t_ns - t0) * 1e-9, 0, 0)}};
     return sweep;
   };
 }
