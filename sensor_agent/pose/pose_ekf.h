@@ -48,8 +48,8 @@ struct PoseFilterOptions {
   // dt / orientation_correlation_s of one (sigma inflated by sqrt(correlation / dt)). 0: white.
   // Without it, 150 readings a second make the filter ~12x overconfident in its orientation.
   double orientation_correlation_s = 1.0;
-  // White gyro rate noise (rad/s): the sensor's noise plus the gait's rate change within a reading
-  // (the filter's rate is piecewise constant). The bias is a state of its own (below), not noise.
+  // White gyro rate noise (rad/s; the simulator's imu_noise is 0.002, 0.02 kept from before issue
+  // 19). The bias is a state of its own when estimate_gyro_bias is on (below), not noise.
   double gyro_sigma_rad_s = 0.02;
   // Issue 19: the gyro bias b is in the state. Initial sigma per axis: a consumer MEMS gyro's
   // turn-on bias is +-0.5 deg/s (~0.01 rad/s; the simulator's gyro_drift draws +-0.005).
@@ -58,13 +58,14 @@ struct PoseFilterOptions {
   double gyro_bias_random_walk_rad_s_sqrt_s = 2e-4;
   // Before issue 19's bias state the bias was taken as noise correlated over this long (each
   // reading weighted as dt / gyro_correlation_s of an independent one). It made the pose worse
-  // (0.70 px, NEES 60 %: the gait's turning rates go unmeasured); kept as a knob, 0 = white.
+  // (0.70 px, NEES 60 %; the camera does not even turn on that run, docs/POSE.md); a knob, 0 = white.
   double gyro_correlation_s = 0.0;
   // Estimate the bias (3 random-walk states, coupled to the attitude through the gyro updates).
   // Off by default: on the campus backpack run it makes the vision-locked pose WORSE (0.79 px,
   // NEES in band 45 %, against 0.517 px / 82 % without; even a bias fixed at its true value does),
   // i.e. something other than the bias dominates there (docs/POSE.md, "Gyro bias"). Off: the
-  // bias stays zero at the variance floor and no measurement couples to it (the filter before).
+  // bias stays zero at the variance floor and no measurement couples to it: the filter before,
+  // but for the gyro's new attitude Jacobian R'[w]x (default bench row unchanged to 3 decimals).
   bool estimate_gyro_bias = false;
   double pixel_sigma_px = 1.5;          // vision point / line-distance sigma
   double gate_chi2_3dof = 25.0;         // GPS / orientation gate (3 dof); chi2(3) p=1e-5 is 25.9
