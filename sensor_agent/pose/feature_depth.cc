@@ -71,7 +71,7 @@ bool RefineAnchoredPoint(AnchoredPoint& a, const PoseEkf& ekf, const PinholeIntr
   dh << Rt * a.anchor_rotation.col(0), Rt * a.anchor_rotation.col(1), Rt * baseline;
   const Eigen::Matrix<double, 2, 3> H = dpi * dh;
   // The pose's uncertainty, projected at the point (as a noise: the anchor is frozen).
-  Eigen::Matrix<double, 2, 12> J;
+  Eigen::Matrix<double, 2, kErrorDim> J;
   Eigen::Matrix2d pose_var = Eigen::Matrix2d::Zero();
   if (ekf.ProjectPoint(k, a.Point(), &J)) pose_var = J * ekf.covariance() * J.transpose();
   const double s = ekf.options().pixel_sigma_px;

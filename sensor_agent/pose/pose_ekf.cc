@@ -42,6 +42,10 @@ std::string PoseFilterOptions::Check() const {
   if (!(std::isfinite(orientation_correlation_s) && orientation_correlation_s >= 0)) return "orientation_correlation_s must be finite and >= 0";
   if (!(std::isfinite(gyro_correlation_s) && gyro_correlation_s >= 0)) return "gyro_correlation_s must be finite and >= 0";
   if (!positive(gyro_sigma_rad_s)) return "gyro_sigma_rad_s must be finite and > 0";
+  if (!positive(gyro_bias_sigma_rad_s)) return "gyro_bias_sigma_rad_s must be finite and > 0";
+  if (!(std::isfinite(gyro_bias_random_walk_rad_s_sqrt_s) && gyro_bias_random_walk_rad_s_sqrt_s >= 0)) {
+    return "gyro_bias_random_walk_rad_s_sqrt_s must be finite and >= 0";
+  }
   if (!positive(pixel_sigma_px)) return "pixel_sigma_px must be finite and > 0";
   if (!positive(gate_chi2_3dof) || !positive(gate_chi2_2dof)) return "gate_chi2_* must be finite and > 0";
   if (!positive(max_predict_s)) return "max_predict_s must be finite and > 0";
@@ -68,9 +72,13 @@ void PoseEkf::Initialize(int64_t t_ns, const Rigid3d& world_from_camera, double 
   q_ = world_from_camera.rotation.normalized();
   v_.setZero();
   w_.setZero();
-  Vector12d sigma;
+  b_.setZero();
+  // Without the bias state (estimate_gyro_bias off) its variance sits at the floor and no
+  // measurement couples to it, so it stays zero: the pre-issue-19 filter.
+  const double bias_sigma = options_.estimate_gyro_bias ? options_.gyro_bias_sigma_rad_s : std::sqrt(options_.min_variance);
+  StateVector sigma;
   sigma << Eigen::Vector3d::Constant(position_sigma_m), Eigen::Vector3d::Constant(1.0),
-      Eigen::Vector3d::Constant(orientation_sigma_rad), Eigen::Vector3d::Constant(0.5);
+      Eigen::Vector3d::Constant(orientation_sigma_rad), Eigen::Vector3d::Constant(0.5), Eigen::Vector3d::Constant(bias_sigma);
   P_ = sigma.cwiseAbs2().asDiagonal();
   initialized_ = true;
 }
@@ -85,11 +93,11 @@ UpdateResult PoseEkf::Predict(int64_t t_ns) {
     p_ += v_ * dt;
     q_ = (SO3Exp(w_ * dt) * q_).normalized();
     // Error-state transition: dp += dv dt, dtheta += dw dt (first order in the world frame).
-    Matrix12d F = Matrix12d::Identity();
+    StateMatrix F = StateMatrix::Identity();
     F.block<3, 3>(kPos, kVel).diagonal().setConstant(dt);
     F.block<3, 3>(kRot, kRate).diagonal().setConstant(dt);
     // White-noise-acceleration process: per axis q [dt^3/3 dt^2/2; dt^2/2 dt].
-    Matrix12d Q = Matrix12d::Zero();
+    StateMatrix Q = StateMatrix::Zero();
     const double qa = options_.accel_noise_m_s2 * options_.accel_noise_m_s2;
     const double qw = options_.angular_accel_noise_rad_s2 * options_.angular_accel_noise_rad_s2;
     for (auto [first, second, q] : {std::tuple{kPos, kVel, qa}, std::tuple{kRot, kRate, qw}}) {
@@ -97,6 +105,11 @@ UpdateResult PoseEkf::Predict(int64_t t_ns) {
       Q.block<3, 3>(first, second).diagonal().setConstant(q * dt * dt / 2);
       Q.block<3, 3>(second, first).diagonal().setConstant(q * dt * dt / 2);
       Q.block<3, 3>(second, second).diagonal().setConstant(q * dt);
+    }
+    // The gyro bias: a random walk (identity transition).
+    if (options_.estimate_gyro_bias) {
+      const double rw = options_.gyro_bias_random_walk_rad_s_sqrt_s;
+      Q.block<3, 3>(kGyroBias, kGyroBias).diagonal().setConstant(rw * rw * dt);
     }
     P_ = F * P_ * F.transpose() + Q;
     if (!landmark_ids_.empty()) cross_ = (F * cross_).eval();  // landmarks are static
@@ -106,43 +119,44 @@ UpdateResult PoseEkf::Predict(int64_t t_ns) {
 }
 
 template <int M>
-UpdateResult PoseEkf::Correct(const Eigen::Matrix<double, M, 1>& innovation, const Eigen::Matrix<double, M, 12>& H,
+UpdateResult PoseEkf::Correct(const Eigen::Matrix<double, M, 1>& innovation, const Eigen::Matrix<double, M, kErrorDim>& H,
                               const Eigen::Matrix<double, M, M>& R, double gate_chi2) {
   if (!AllFinite(innovation) || !AllFinite(H) || !AllFinite(R)) return {Rejection::kNotFinite, 0};
-  const Eigen::Matrix<double, 12, M> PHt = P_ * H.transpose();
+  const Eigen::Matrix<double, kErrorDim, M> PHt = P_ * H.transpose();
   const Eigen::Matrix<double, M, M> S = H * PHt + R;
   const Eigen::LDLT<Eigen::Matrix<double, M, M>> ldlt(S);
   if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().array() > 0).all()) return {Rejection::kNotFinite, 0};
   const double d2 = innovation.dot(ldlt.solve(innovation));
   if (!std::isfinite(d2)) return {Rejection::kNotFinite, 0};
   if (d2 > gate_chi2) return {Rejection::kGate, d2};
-  const Eigen::Matrix<double, 12, M> K = ldlt.solve(PHt.transpose()).transpose();
+  const Eigen::Matrix<double, kErrorDim, M> K = ldlt.solve(PHt.transpose()).transpose();
   if (!landmark_ids_.empty()) {
     const Eigen::Matrix<double, Eigen::Dynamic, M> KL = ldlt.solve((cross_.transpose() * H.transpose()).transpose()).transpose();
     CorrectLandmarks<M>(K, KL, S, innovation);
   }
-  const Matrix12d I_KH = Matrix12d::Identity() - K * H;
+  const StateMatrix I_KH = StateMatrix::Identity() - K * H;
   P_ = I_KH * P_ * I_KH.transpose() + K * R * K.transpose();  // Joseph form
   Inject(K * innovation);
   Condition();
   return {Rejection::kNone, d2};
 }
 
-void PoseEkf::Inject(const Vector12d& dx) {
+void PoseEkf::Inject(const StateVector& dx) {
   p_ += dx.segment<3>(kPos);
   v_ += dx.segment<3>(kVel);
   const Eigen::Vector3d dtheta = dx.segment<3>(kRot);
   q_ = (SO3Exp(dtheta) * q_).normalized();
   w_ += dx.segment<3>(kRate);
+  b_ += dx.segment<3>(kGyroBias);
   // Reset Jacobian of the world-frame orientation error: G = I - [dtheta/2]x (Solà, eq. 287).
-  Matrix12d G = Matrix12d::Identity();
+  StateMatrix G = StateMatrix::Identity();
   G.block<3, 3>(kRot, kRot) -= 0.5 * Skew(dtheta);
   P_ = G * P_ * G.transpose();
   if (!landmark_ids_.empty()) cross_ = (G * cross_).eval();
 }
 
 template <int M>
-void PoseEkf::CorrectLandmarks(const Eigen::Matrix<double, 12, M>& K, const Eigen::Matrix<double, Eigen::Dynamic, M>& KL,
+void PoseEkf::CorrectLandmarks(const Eigen::Matrix<double, kErrorDim, M>& K, const Eigen::Matrix<double, Eigen::Dynamic, M>& KL,
                                const Eigen::Matrix<double, M, M>& S, const Eigen::Matrix<double, M, 1>& innovation) {
   cross_ -= K * S * KL.transpose();
   landmark_cov_ -= KL * S * KL.transpose();
@@ -171,7 +185,7 @@ bool PoseEkf::AddLandmark(int64_t id, const Eigen::Vector3d& point_in_world, con
   landmark_ids_.push_back(id);
   landmarks_.conservativeResize(n + 3);
   landmarks_.segment<3>(n) = point_in_world;
-  cross_.conservativeResize(12, n + 3);
+  cross_.conservativeResize(kErrorDim, n + 3);
   cross_.middleCols<3>(n).setZero();
   Eigen::MatrixXd grown = Eigen::MatrixXd::Zero(n + 3, n + 3);
   grown.topLeftCorner(n, n) = landmark_cov_;
@@ -192,7 +206,7 @@ bool PoseEkf::AddLandmarkOnRay(int64_t id, const PinholeIntrinsics& k, const Eig
   const Eigen::Vector3d m((uv.x() - k.cx) / k.fx, (uv.y() - k.cy) / k.fy, 1.0);
   const Eigen::Vector3d rc = R * (depth_m * m);
   const Eigen::Vector3d point = p_ + rc;
-  Eigen::Matrix<double, 3, 12> Jx = Eigen::Matrix<double, 3, 12>::Zero();
+  Eigen::Matrix<double, 3, kErrorDim> Jx = Eigen::Matrix<double, 3, kErrorDim>::Zero();
   Jx.block<3, 3>(0, kPos).setIdentity();
   Jx.block<3, 3>(0, kRot) = -Skew(rc);
   Eigen::Matrix<double, 3, 2> Juv;
@@ -206,7 +220,7 @@ bool PoseEkf::AddLandmarkOnRay(int64_t id, const PinholeIntrinsics& k, const Eig
   landmark_ids_.push_back(id);
   landmarks_.conservativeResize(n + 3);
   landmarks_.segment<3>(n) = point;
-  cross_.conservativeResize(12, n + 3);
+  cross_.conservativeResize(kErrorDim, n + 3);
   cross_.middleCols<3>(n) = P_ * Jx.transpose();
   Eigen::MatrixXd grown(n + 3, n + 3);
   grown.topLeftCorner(n, n) = landmark_cov_;
@@ -221,11 +235,11 @@ bool PoseEkf::AddLandmarkOnRay(int64_t id, const PinholeIntrinsics& k, const Eig
 
 Eigen::MatrixXd PoseEkf::FullCovariance() const {
   const int n = static_cast<int>(landmark_ids_.size()) * 3;
-  Eigen::MatrixXd full(12 + n, 12 + n);
-  full.topLeftCorner<12, 12>() = P_;
+  Eigen::MatrixXd full(kErrorDim + n, kErrorDim + n);
+  full.topLeftCorner<kErrorDim, kErrorDim>() = P_;
   if (n > 0) {
-    full.topRightCorner(12, n) = cross_;
-    full.bottomLeftCorner(n, 12) = cross_.transpose();
+    full.topRightCorner(kErrorDim, n) = cross_;
+    full.bottomLeftCorner(n, kErrorDim) = cross_.transpose();
     full.bottomRightCorner(n, n) = landmark_cov_;
   }
   return full;
@@ -239,7 +253,7 @@ void PoseEkf::RemoveLandmark(int64_t id) {
   Eigen::VectorXd l(n - 3);
   l << landmarks_.head(at), landmarks_.tail(tail);
   landmarks_ = std::move(l);
-  Eigen::MatrixXd x(12, n - 3);
+  Eigen::MatrixXd x(kErrorDim, n - 3);
   x << cross_.leftCols(at), cross_.rightCols(tail);
   cross_ = std::move(x);
   Eigen::MatrixXd c(n - 3, n - 3);
@@ -259,14 +273,14 @@ std::optional<std::pair<Eigen::Vector3d, Eigen::Matrix3d>> PoseEkf::Landmark(int
 UpdateResult PoseEkf::UpdateLandmark(const PinholeIntrinsics& k, int64_t id, const Eigen::Vector2d& uv, double extra_variance_px2) {
   const int i = LandmarkIndex(id);
   if (i < 0 || !uv.allFinite() || !std::isfinite(extra_variance_px2)) return {Rejection::kNotFinite, 0};
-  Eigen::Matrix<double, 2, 12> Hp;
+  Eigen::Matrix<double, 2, kErrorDim> Hp;
   const std::optional<Eigen::Vector2d> predicted = ProjectPoint(k, landmarks_.segment<3>(3 * i), &Hp);
   if (!predicted) return {Rejection::kBehindCamera, 0};
   const Eigen::Matrix<double, 2, 3> Hl = -Hp.block<2, 3>(0, kPos);  // d pixel / d point = - d pixel / d camera position
   const Eigen::Vector2d innovation = uv - *predicted;
   const Eigen::Matrix2d R = Eigen::Matrix2d::Identity() * (options_.pixel_sigma_px * options_.pixel_sigma_px + std::max(0.0, extra_variance_px2));
   // P H' for the pose rows and the landmark rows.
-  const Eigen::Matrix<double, 12, 2> PHt = P_ * Hp.transpose() + cross_.middleCols<3>(3 * i) * Hl.transpose();
+  const Eigen::Matrix<double, kErrorDim, 2> PHt = P_ * Hp.transpose() + cross_.middleCols<3>(3 * i) * Hl.transpose();
   const Eigen::Matrix<double, Eigen::Dynamic, 2> LHt = cross_.transpose() * Hp.transpose() + landmark_cov_.middleCols<3>(3 * i) * Hl.transpose();
   const Eigen::Matrix2d S = Hp * PHt + Hl * LHt.middleRows<3>(3 * i) + R;
   if (!innovation.allFinite() || !S.allFinite()) return {Rejection::kNotFinite, 0};
@@ -275,7 +289,7 @@ UpdateResult PoseEkf::UpdateLandmark(const PinholeIntrinsics& k, int64_t id, con
   const double d2 = innovation.dot(ldlt.solve(innovation));
   if (!std::isfinite(d2)) return {Rejection::kNotFinite, 0};
   if (d2 > options_.gate_chi2_2dof) return {Rejection::kGate, d2};
-  const Eigen::Matrix<double, 12, 2> K = ldlt.solve(PHt.transpose()).transpose();
+  const Eigen::Matrix<double, kErrorDim, 2> K = ldlt.solve(PHt.transpose()).transpose();
   const Eigen::Matrix<double, Eigen::Dynamic, 2> KL = ldlt.solve(LHt.transpose()).transpose();
   P_ -= K * S * K.transpose();
   CorrectLandmarks<2>(K, KL, S, innovation);
@@ -286,7 +300,7 @@ UpdateResult PoseEkf::UpdateLandmark(const PinholeIntrinsics& k, int64_t id, con
 
 void PoseEkf::Condition() {
   P_ = (0.5 * (P_ + P_.transpose())).eval();
-  for (int i = 0; i < 12; ++i) P_(i, i) = std::max(P_(i, i), options_.min_variance);
+  for (int i = 0; i < kErrorDim; ++i) P_(i, i) = std::max(P_(i, i), options_.min_variance);
   if (!landmark_ids_.empty()) {
     landmark_cov_ = (0.5 * (landmark_cov_ + landmark_cov_.transpose())).eval();
     for (Eigen::Index i = 0; i < landmark_cov_.rows(); ++i) landmark_cov_(i, i) = std::max(landmark_cov_(i, i), options_.min_variance);
@@ -297,7 +311,7 @@ UpdateResult PoseEkf::UpdatePosition(const Eigen::Vector3d& position_m, const Ei
   Eigen::Matrix3d R = 0.5 * (covariance + covariance.transpose());
   const double floor = options_.gps_min_sigma_m * options_.gps_min_sigma_m;
   for (int i = 0; i < 3; ++i) R(i, i) = std::max(R(i, i), floor);
-  Eigen::Matrix<double, 3, 12> H = Eigen::Matrix<double, 3, 12>::Zero();
+  Eigen::Matrix<double, 3, kErrorDim> H = Eigen::Matrix<double, 3, kErrorDim>::Zero();
   H.block<3, 3>(0, kPos).setIdentity();
   return Correct<3>(position_m - p_, H, R, options_.gate_chi2_3dof);
 }
@@ -306,23 +320,29 @@ UpdateResult PoseEkf::UpdateOrientation(const Eigen::Quaterniond& world_from_cam
   if (!world_from_camera.coeffs().allFinite() || world_from_camera.norm() < 1e-6) return {Rejection::kNotFinite, 0};
   // Measured = Exp(dtheta) * q  =>  innovation = Log(measured * q^-1), world frame.
   const Eigen::Vector3d innovation = SO3Log(world_from_camera.normalized() * q_.conjugate());
-  Eigen::Matrix<double, 3, 12> H = Eigen::Matrix<double, 3, 12>::Zero();
+  Eigen::Matrix<double, 3, kErrorDim> H = Eigen::Matrix<double, 3, kErrorDim>::Zero();
   H.block<3, 3>(0, kRot).setIdentity();
   const Eigen::Matrix3d R = Eigen::Matrix3d::Identity() * sigma_rad * sigma_rad;
   return Correct<3>(innovation, H, R, options_.gate_chi2_3dof);
 }
 
 UpdateResult PoseEkf::UpdateRate(const Eigen::Vector3d& rate_in_camera_rad_s, double sigma_rad_s) {
-  // The gyro measures the body rate; in the world frame it is q * rate (orientation error neglected).
-  const Eigen::Vector3d measured = q_ * rate_in_camera_rad_s;
-  Eigen::Matrix<double, 3, 12> H = Eigen::Matrix<double, 3, 12>::Zero();
-  H.block<3, 3>(0, kRate).setIdentity();
+  if (!rate_in_camera_rad_s.allFinite()) return {Rejection::kNotFinite, 0};
+  // The gyro measures the camera-frame rate plus its bias: z = R' w + b + noise. With the true
+  // rotation Exp(dtheta) R: R' Exp(-dtheta) w ~ R' (w + [w]x dtheta), so dz/ddtheta = R' [w]x,
+  // dz/dw = R', dz/db = I (issue 19: the bias is estimated against the attitude that vision and
+  // the AHRS observe, instead of pinning the rate to the biased reading).
+  const Eigen::Matrix3d Rt = q_.conjugate().toRotationMatrix();
+  Eigen::Matrix<double, 3, kErrorDim> H = Eigen::Matrix<double, 3, kErrorDim>::Zero();
+  H.block<3, 3>(0, kRot) = Rt * Skew(w_);
+  H.block<3, 3>(0, kRate) = Rt;
+  if (options_.estimate_gyro_bias) H.block<3, 3>(0, kGyroBias).setIdentity();
   const Eigen::Matrix3d R = Eigen::Matrix3d::Identity() * sigma_rad_s * sigma_rad_s;
-  return Correct<3>(measured - w_, H, R, options_.gate_chi2_3dof);
+  return Correct<3>(rate_in_camera_rad_s - (Rt * w_ + b_), H, R, options_.gate_chi2_3dof);
 }
 
 std::optional<Eigen::Vector2d> PoseEkf::ProjectPoint(const PinholeIntrinsics& k, const Eigen::Vector3d& point_in_world,
-                                                     Eigen::Matrix<double, 2, 12>* jacobian) const {
+                                                     Eigen::Matrix<double, 2, kErrorDim>* jacobian) const {
   const Eigen::Vector3d rel = point_in_world - p_;
   const Eigen::Vector3d c = q_.conjugate() * rel;
   if (!(c.z() > kMinDepth_m) || !c.allFinite()) return std::nullopt;
@@ -343,7 +363,7 @@ std::optional<Eigen::Vector2d> PoseEkf::ProjectPoint(const PinholeIntrinsics& k,
 UpdateResult PoseEkf::UpdatePoint(const PinholeIntrinsics& k, const Eigen::Vector3d& point_in_world, const Eigen::Vector2d& uv,
                                   double extra_variance_px2) {
   if (!uv.allFinite() || !point_in_world.allFinite() || !std::isfinite(extra_variance_px2)) return {Rejection::kNotFinite, 0};
-  Eigen::Matrix<double, 2, 12> H;
+  Eigen::Matrix<double, 2, kErrorDim> H;
   const std::optional<Eigen::Vector2d> predicted = ProjectPoint(k, point_in_world, &H);
   if (!predicted) return {Rejection::kBehindCamera, 0};
   const double var = options_.pixel_sigma_px * options_.pixel_sigma_px + std::max(0.0, extra_variance_px2);
@@ -351,7 +371,7 @@ UpdateResult PoseEkf::UpdatePoint(const PinholeIntrinsics& k, const Eigen::Vecto
 }
 
 std::optional<Eigen::Vector2d> PoseEkf::LineResidual(const PinholeIntrinsics& k, const Line3d& line, const Eigen::Vector2d& a,
-                                                     const Eigen::Vector2d& b, Eigen::Matrix<double, 2, 12>* jacobian) const {
+                                                     const Eigen::Vector2d& b, Eigen::Matrix<double, 2, kErrorDim>* jacobian) const {
   const std::optional<Eigen::Vector2d> r = LineDistances(k, line, a, b, p_, q_);
   if (!r || !jacobian) return r;
   // Central differences over the six pose error components (position, world rotation vector):
@@ -374,7 +394,7 @@ UpdateResult PoseEkf::UpdateLine(const PinholeIntrinsics& k, const Line3d& line,
   if (!a.allFinite() || !b.allFinite() || !line.point.allFinite() || !line.direction.allFinite() || line.direction.norm() < 1e-9) {
     return {Rejection::kNotFinite, 0};
   }
-  Eigen::Matrix<double, 2, 12> H;
+  Eigen::Matrix<double, 2, kErrorDim> H;
   const std::optional<Eigen::Vector2d> r = LineResidual(k, line, a, b, &H);
   if (!r) return {Rejection::kBehindCamera, 0};
   if (!std::isfinite(extra_variance_px2)) return {Rejection::kNotFinite, 0};

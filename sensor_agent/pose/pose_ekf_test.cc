@@ -19,9 +19,9 @@ PinholeIntrinsics Camera() {
   return k;
 }
 
-bool IsSpd(const Matrix12d& P) {
+bool IsSpd(const StateMatrix& P) {
   if (P != P.transpose()) return false;  // exactly symmetric
-  Eigen::LLT<Matrix12d> llt(P);
+  Eigen::LLT<StateMatrix> llt(P);
   return llt.info() == Eigen::Success;
 }
 
@@ -46,7 +46,7 @@ TEST(So3, ExpLogRoundTripFromTinyAnglesToPi) {
 TEST(PoseEkf, PointJacobianMatchesFiniteDifferences) {
   PoseEkf ekf = Filter(Rigid3d(SO3Exp(Eigen::Vector3d(0.3, -1.2, 0.4)), Eigen::Vector3d(1, 2, 3)));
   const Eigen::Vector3d point = ekf.world_from_camera() * Eigen::Vector3d(2, -1, 12);
-  Eigen::Matrix<double, 2, 12> J;
+  Eigen::Matrix<double, 2, kErrorDim> J;
   ASSERT_TRUE(ekf.ProjectPoint(Camera(), point, &J));
   // Perturb the point the other way: moving the point by +e is moving the camera by -e.
   for (int i = 0; i < 3; ++i) {
@@ -103,7 +103,7 @@ TEST(PoseEkf, LineUpdatesUseTheInfiniteLineAndItsJacobianIsConsistent) {
       const auto a = ProjectToPixel(Camera(), truth.Inverse() * (l.point + (1.0 + round) * l.direction));
       const auto b = ProjectToPixel(Camera(), truth.Inverse() * (l.point + (4.0 + round) * l.direction));
       ASSERT_TRUE(a && b);
-      Eigen::Matrix<double, 2, 12> J;
+      Eigen::Matrix<double, 2, kErrorDim> J;
       const auto r = ekf.LineResidual(Camera(), l, *a, *b, &J);
       ASSERT_TRUE(r);
       EXPECT_TRUE(J.allFinite());
@@ -118,7 +118,7 @@ TEST(PoseEkf, LineUpdatesUseTheInfiniteLineAndItsJacobianIsConsistent) {
 TEST(PoseEkf, FeaturesBehindTheCameraAreRejectedAndHorizonFeaturesAreHarmless) {
   const Rigid3d truth = LookAt(Eigen::Vector3d(0, 0, 1.7), Eigen::Vector3d(0, 100, 1.7));
   PoseEkf ekf = Filter(truth, 0.5, 1 * kDeg);
-  const Matrix12d before = ekf.covariance();
+  const StateMatrix before = ekf.covariance();
   const Eigen::Vector3d behind(0, -10, 1.7);
   EXPECT_EQ(ekf.UpdatePoint(Camera(), behind, {320, 240}).rejection, Rejection::kBehindCamera);
   EXPECT_EQ(ekf.UpdateLine(Camera(), {{0, -10, 0}, {1, 0, 0}}, {0, 240}, {600, 240}).rejection, Rejection::kBehindCamera);
@@ -127,7 +127,7 @@ TEST(PoseEkf, FeaturesBehindTheCameraAreRejectedAndHorizonFeaturesAreHarmless) {
   const Eigen::Vector3d horizon(1e5, 1e7, 1.7);
   const auto uv = ProjectToPixel(Camera(), truth.Inverse() * horizon);
   ASSERT_TRUE(uv);
-  Eigen::Matrix<double, 2, 12> J;
+  Eigen::Matrix<double, 2, kErrorDim> J;
   ASSERT_TRUE(ekf.ProjectPoint(Camera(), horizon, &J));
   const double position_sensitivity = J.block<2, 3>(0, kPos).norm();
   EXPECT_LT(position_sensitivity, 1e-3);
@@ -153,7 +153,7 @@ TEST(PoseEkf, A50MetreGpsOutlierIsGatedWithItsDistance) {
 TEST(PoseEkf, TimeMustNotGoBackwardsAndZeroDtIsANoOp) {
   PoseEkf ekf = Filter(Rigid3d());
   ASSERT_TRUE(ekf.Predict(1'000'000'000).accepted());
-  const Matrix12d P = ekf.covariance();
+  const StateMatrix P = ekf.covariance();
   EXPECT_TRUE(ekf.Predict(1'000'000'000).accepted());  // dt = 0
   EXPECT_EQ(ekf.covariance(), P);
   EXPECT_EQ(ekf.Predict(999'999'999).rejection, Rejection::kTimeNotIncreasing);

@@ -24,9 +24,9 @@ PinholeIntrinsics Camera() {
   return k;
 }
 
-bool IsSpd(const Matrix12d& P) {
+bool IsSpd(const StateMatrix& P) {
   if (!P.allFinite() || P != P.transpose()) return false;
-  return Eigen::LLT<Matrix12d>(P).info() == Eigen::Success;
+  return Eigen::LLT<StateMatrix>(P).info() == Eigen::Success;
 }
 
 TEST(PoseEkfHardCases, AHugeTimeStepStaysFiniteAndTheNextFixPullsThePositionBack) {
@@ -51,7 +51,7 @@ TEST(PoseEkfHardCases, AllFeaturesOnOneWallEdgeKeepTheCovarianceSpdAndDoNotInven
   const Rigid3d truth = LookAt(Eigen::Vector3d(0, 0, 1.7), Eigen::Vector3d(0, 10, 1.7));
   PoseEkf ekf;
   ekf.Initialize(0, Rigid3d(truth.rotation, truth.translation + Eigen::Vector3d(0.2, 0.3, 0)), 0.5, 1 * kDeg);
-  const Matrix12d before = ekf.covariance();
+  const StateMatrix before = ekf.covariance();
   for (int round = 0; round < 20; ++round) {
     for (int i = 0; i < 10; ++i) {
       const Eigen::Vector3d p(0.5, 10, 0.3 * i);

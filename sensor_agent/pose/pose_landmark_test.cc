@@ -52,13 +52,13 @@ TEST(PoseEkfLandmarks, RepeatedSightingsOfAnUncertainPointDoNotMakeThePoseOverco
   EXPECT_GE(joint_rot, naive_rot);
   // The camera's tilt cannot be known better than the point's 0.5 m at 11 m allows (~0.045 rad).
   EXPECT_GT(std::sqrt(joint_pose(3, 3)), 0.5 * 0.5 / 11.0);
-  EXPECT_TRUE(Eigen::LLT<Matrix12d>(joint.covariance()).info() == Eigen::Success);
+  EXPECT_TRUE(Eigen::LLT<StateMatrix>(joint.covariance()).info() == Eigen::Success);
   const auto l = joint.Landmark(7);
   ASSERT_TRUE(l);
   EXPECT_TRUE(Eigen::LLT<Eigen::Matrix3d>(l->second).info() == Eigen::Success);
   EXPECT_LT((l->first - point).norm(), 1e-6);  // seen exactly where it is
   // Removing it marginalises: the pose covariance is untouched.
-  const Matrix12d before = joint.covariance();
+  const StateMatrix before = joint.covariance();
   joint.RemoveLandmark(7);
   EXPECT_FALSE(joint.HasLandmark(7));
   EXPECT_EQ(joint.covariance(), before);
@@ -150,7 +150,7 @@ TEST(PoseEkfLandmarks, LandmarksInitialisedFromThePoseKeepThePoseNeesConsistent)
     Eigen::MatrixXd c(6 + n, 6 + n);
     const std::vector<int> rows = [&] {
       std::vector<int> r = {kPos, kPos + 1, kPos + 2, kRot, kRot + 1, kRot + 2};
-      for (int i = 0; i < n; ++i) r.push_back(12 + i);
+      for (int i = 0; i < n; ++i) r.push_back(kErrorDim + i);
       return r;
     }();
     for (int a = 0; a < 6 + n; ++a)

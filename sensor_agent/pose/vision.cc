@@ -133,6 +133,7 @@ struct VisionTracker::Impl {
   std::vector<KnownTrack> known;    // known points followed since the last keyframe
   std::vector<int> known_lines;     // line features matched on the last keyframe, followed by edge search
   int frames_since_keyframe = 0;
+  bool acquired = false;       // the first vision frame has widened the GPS + AHRS prior (acquisition_*)
   int good_full_matches = 0;  // consecutive full matchings that fitted well (lock_frames)
   int bad_full_matches = 0;   // ... and badly (lost_frames)
   int64_t next_track_id = 1;
@@ -328,6 +329,10 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
   Impl& m = *impl_;
   VisionFrameStats stats;
   if (m.options.max_features == 0 || width != m.k.width || height != m.k.height || !ekf.initialized()) return stats;
+  if (!m.acquired) {
+    ekf.InflatePose(m.options.acquisition_position_sigma_m, m.options.acquisition_orientation_sigma_deg * 3.14159265358979323846 / 180);
+    m.acquired = true;
+  }
   StageTimer timer(stats);
   const cv::Mat image(height, width, CV_8UC3, const_cast<uint8_t*>(bgr));
   cv::Mat gray;
@@ -439,7 +444,7 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
     double pose_sigma_px = 0;  // the pose's own projected uncertainty, summed over the tracks
     const double var = ekf.options().pixel_sigma_px * ekf.options().pixel_sigma_px;
     for (size_t i = 0; i < m.known.size(); ++i) {
-      Eigen::Matrix<double, 2, 12> J;
+      Eigen::Matrix<double, 2, kErrorDim> J;
       const std::optional<Eigen::Vector2d> h = ekf.ProjectPoint(m.k, m.map.points[m.known[i].index], &J);
       const Eigen::Matrix2d JPJ = J * ekf.covariance() * J.transpose();
       const Eigen::Matrix2d S = JPJ + var * Eigen::Matrix2d::Identity();
@@ -621,7 +626,7 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
     for (Track& t : m.tracks) {
       if (budget <= 0 || !m.options.new_points_in_pose || m.options.joint_new_points) break;
       if (t.observations < m.options.new_point_min_observations || t.LargestSigma() > m.options.new_point_sigma_m) continue;
-      Eigen::Matrix<double, 2, 12> J;
+      Eigen::Matrix<double, 2, kErrorDim> J;
       if (!ekf.ProjectPoint(m.k, t.point, &J)) continue;
       const Eigen::Matrix<double, 2, 3> H = -J.block<2, 3>(0, kPos);
       const double extra = 0.5 * (H * t.covariance * H.transpose()).trace();

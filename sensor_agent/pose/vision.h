@@ -84,6 +84,14 @@ struct VisionOptions {
   // fits in a row, issue 19): matched from an unconverged prediction, a frame's features share its
   // association error (the coarse offset), which independent 1.5 px noise does not cover.
   double acquiring_sigma_px = 0;
+  // Acquisition (issue 19): before the first vision frame the pose rests on GPS and the AHRS, whose
+  // errors are correlated over seconds (multipath ~1 m, AHRS drift ~1-2 deg) and so not in their
+  // per-reading covariances; the first frame's matching would find the filter far more confident
+  // than it is (NEES 160, and the surprise lands in the gyro bias). Before the first vision update
+  // the pose covariance is widened by these sigmas. Off (0) by default: 1 m / 1 deg left the
+  // first frames out of the 95 % band all the same (docs/POSE.md, "Gyro bias").
+  double acquisition_position_sigma_m = 0;
+  double acquisition_orientation_sigma_deg = 0;
   int min_tracked_known = 8;      // fewer tracked known features than this: full matching now (weak lock)
   double weak_lock_gated_share = 0.25;
   double lock_sigma_px = 1.0;     // the pose's projected uncertainty at the tracked features above this (px, mean): full matching now  // more than this share of tracked known features outside the gate: full matching now

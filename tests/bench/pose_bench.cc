@@ -56,6 +56,10 @@ struct PoseBenchOptions {
   double gyro_correlation_s = pose::PoseFilterOptions{}.gyro_correlation_s;  // issue 19
   double acquiring_sigma_px = pose::VisionOptions{}.acquiring_sigma_px;  // issue 19
   double gyro_sigma_rad_s = pose::PoseFilterOptions{}.gyro_sigma_rad_s;
+  bool gyro_bias = pose::PoseFilterOptions{}.estimate_gyro_bias;  // issue 19: the bias in the state
+  double acquisition_sigma_m = pose::VisionOptions{}.acquisition_position_sigma_m;  // issue 19
+  double acquisition_sigma_deg = pose::VisionOptions{}.acquisition_orientation_sigma_deg;
+  double gyro_bias_sigma_rad_s = pose::PoseFilterOptions{}.gyro_bias_sigma_rad_s;
   bool knobs = true;     // the front end's knobs at 50 features
   bool variants = true;  // the bus and bump scenario variants (need --seconds >= 7.2)
   bool consistency_knobs = true;  // the filter's noise model (pixel sigma, process noise) against NEES
@@ -326,6 +330,10 @@ int RunPose(const PoseBenchOptions& o) {
       runs.push_back({50, knob, "gps_imu_vision_50_" + key, std::move(vtweak), nullptr, std::move(tweak)});
     };
     add_filter("pixel sigma 2.0 px", "pixel_sigma_2", [](pose::PoseFilterOptions& f) { f.pixel_sigma_px = 2.0; });
+    add_filter("gyro bias in the state (issue 19)", "gyro_bias", [](pose::PoseFilterOptions& f) { f.estimate_gyro_bias = true; });
+    add_filter("gyro bias in the state, prior widened by 1 m / 1 deg before the first frame", "gyro_bias_acquisition",
+               [](pose::PoseFilterOptions& f) { f.estimate_gyro_bias = true; },
+               [](pose::VisionOptions& v) { v.acquisition_position_sigma_m = 1.0, v.acquisition_orientation_sigma_deg = 1.0; });
     add_filter("angular acceleration noise 3 rad/s2/sqrt(Hz)", "angular_accel_3", [](pose::PoseFilterOptions& f) { f.angular_accel_noise_rad_s2 = 3.0; });
     add_filter("acceleration noise 1 m/s2/sqrt(Hz) (before issue 19)", "accel_1", [](pose::PoseFilterOptions& f) { f.accel_noise_m_s2 = 1.0; });
     add_filter("acceleration noise 5 m/s2/sqrt(Hz)", "accel_5", [](pose::PoseFilterOptions& f) { f.accel_noise_m_s2 = 5.0; });
@@ -377,11 +385,15 @@ int RunPose(const PoseBenchOptions& o) {
     fo.orientation_correlation_s = o.ahrs_correlation_s;
     fo.gyro_correlation_s = o.gyro_correlation_s;
     fo.gyro_sigma_rad_s = o.gyro_sigma_rad_s;
+    fo.estimate_gyro_bias = o.gyro_bias;
+    fo.gyro_bias_sigma_rad_s = o.gyro_bias_sigma_rad_s;
     if (run.filter_tweak) run.filter_tweak(fo);
     pose::PoseTracker tracker(log, fo);
     pose::VisionOptions vo;
     vo.max_features = run.features;
     vo.acquiring_sigma_px = o.acquiring_sigma_px;
+    vo.acquisition_position_sigma_m = o.acquisition_sigma_m;
+    vo.acquisition_orientation_sigma_deg = o.acquisition_sigma_deg;
     vo.use_lines = o.lines;
     vo.use_new_points = o.new_points;
     if (run.tweak) run.tweak(vo);
@@ -667,6 +679,16 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--gyro-sigma", o->gyro_sigma_rad_s, "gyro rate sigma, rad/s (PoseFilterOptions::gyro_sigma_rad_s)")
       ->capture_default_str()
       ->check(ave::cli::Range(1e-6, 10.0));
+  sub.add_option("--gyro-bias", o->gyro_bias, "estimate the gyro bias in the filter state (issue 19; off by default: it makes this run worse, docs/POSE.md)")->capture_default_str();
+  sub.add_option("--gyro-bias-sigma", o->gyro_bias_sigma_rad_s, "initial sigma of the gyro bias state, rad/s")
+      ->capture_default_str()
+      ->check(ave::cli::Range(1e-6, 1.0));
+  sub.add_option("--acquisition-sigma-m", o->acquisition_sigma_m, "position sigma added before the first vision frame (issue 19; 0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 100.0));
+  sub.add_option("--acquisition-sigma-deg", o->acquisition_sigma_deg, "orientation sigma added before the first vision frame (issue 19; 0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 90.0));
   sub.add_option("--gyro-correlation", o->gyro_correlation_s, "seconds over which gyro errors (bias) are correlated (0: white, before issue 19's NEES fix)")
       ->capture_default_str()
       ->check(ave::cli::Range(0, 1e6));
