@@ -186,7 +186,16 @@ def path_pixels(img):
     return sum(1 for y in range(0, h, 2) for x in range(0, w, 2)
                if abs(rows[y][x * bpp] - 255) <= 30 and abs(rows[y][x * bpp + 1] - 120) <= 40 and rows[y][x * bpp + 2] <= 80)
 r_paths, l_paths = path_pixels(replay), path_pixels(live_img)
-print(f'object path pixels (every 2nd row and column): replay snapshot {r_paths}, live snapshot {l_paths}')
+# Where the replay playhead stood in the replay snapshot (0 = the time line's left end, the
+# recording's start; 1 = now): how far the replay had played when 'p' was taken.
+def playhead_fraction(img, rect):
+    w, h, bpp, rows = img
+    x0, y0, rw, rh = rect
+    xs = [x for y in range(max(0, y0), min(h, y0 + rh)) for x in range(max(0, x0), min(w, x0 + rw))
+          if all(abs(rows[y][x * bpp + k] - YELLOW[k]) <= 40 for k in range(3))]
+    return (sum(xs) / len(xs) - x0) / max(1, rw) if xs else float('nan')
+print(f'object path pixels (every 2nd row and column): replay snapshot {r_paths}, live snapshot {l_paths}; '
+      f'replay playhead at {playhead_fraction(replay, r_rect):.2f} of the time line')
 assert l_paths >= 50, 'the live snapshot shows no object paths'
 assert r_paths * 4 <= l_paths, 'the replay snapshot shows as many object paths as live: not the recording\'s start'
 PY
