@@ -276,7 +276,7 @@ int RunStudio(const StudioBenchOptions& o) {
       absl::StatusOr<FrameSetResult> r = studio::ReconstructFrameSet(set->cameras, set->images, set->backgrounds, ro);
       if (!r.ok()) return r.status();
       Row row = Score(name, mm, *set, *r, texture);
-      auto it = std::find_if(rows.begin(), rows.end(), [&](const Row& x) { return x.name == name && x.voxel_mm == mm; });
+      auto it = std::find_if(rows.begin(), rows.end(), [&, n = name](const Row& x) { return x.name == n && x.voxel_mm == mm; });
       if (it == rows.end()) {
         rows.push_back(Row{name, mm});
         it = rows.end() - 1;
@@ -307,7 +307,7 @@ int RunStudio(const StudioBenchOptions& o) {
         row.chamfer_mm = studio::testing::ChamferMm(*s, set->truth_mesh);
         row.surface_ms = row.ms = ms;
         row.triangles = static_cast<double>(s->TriangleCount());
-        auto it = std::find_if(rows.begin(), rows.end(), [&](const Row& x) { return x.name == name && x.voxel_mm == mm; });
+        auto it = std::find_if(rows.begin(), rows.end(), [&, n = name](const Row& x) { return x.name == n && x.voxel_mm == mm; });
         if (it == rows.end()) {
           rows.push_back(Row{name, mm});
           it = rows.end() - 1;
