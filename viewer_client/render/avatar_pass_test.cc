@@ -120,17 +120,22 @@ class AvatarCrowdTest : public AvatarTest {
     options.moving_view_scale = 1;
     return options;
   }
+  // The reference: the same scene, projector and walk in a renderer without the view cache.
+  void MakeExactRenderer(std::unique_ptr<Renderer>* exact) const {
+    RendererOptions exact_options = Options();
+    exact_options.view_cache = false;
+    absl::StatusOr<std::unique_ptr<Renderer>> made = Renderer::Create(exact_options);
+    ASSERT_TRUE(made.ok()) << made.status();
+    *exact = std::move(*made);
+    ASSERT_TRUE((*exact)->SetStaticMesh(mesh_).ok());
+    ASSERT_TRUE((*exact)->SetProjectors({MakeProjector(projector_, image_, 1)}).ok());
+    ASSERT_TRUE((*exact)->SetAvatarSequence(avatar::MakeProceduralWalk()).ok());
+  }
 };
 
 TEST_F(AvatarCrowdTest, CachedViewFallsBackToExactAndMatchesIt) {
-  RendererOptions exact_options = Options();
-  exact_options.view_cache = false;
-  absl::StatusOr<std::unique_ptr<Renderer>> made = Renderer::Create(exact_options);
-  ASSERT_TRUE(made.ok()) << made.status();
-  std::unique_ptr<Renderer> exact = std::move(*made);
-  ASSERT_TRUE(exact->SetStaticMesh(mesh_).ok());
-  ASSERT_TRUE(exact->SetProjectors({MakeProjector(projector_, image_, 1)}).ok());
-  ASSERT_TRUE(exact->SetAvatarSequence(avatar::MakeProceduralWalk()).ok());
+  std::unique_ptr<Renderer> exact;
+  ASSERT_NO_FATAL_FAILURE(MakeExactRenderer(&exact));
   viewer_ = Camera{PinholeIntrinsics::FromFov(kWidth, kHeight, 60), LookAt({0, 16, 7}, {6, 5, 1})};
   RenderViewer();  // the cache is built without people
   for (int frame = 0; frame < 3; ++frame) {
@@ -158,14 +163,8 @@ TEST_F(AvatarCrowdTest, CachedViewFallsBackToExactAndMatchesIt) {
 // pixel instead of counting 40 people's shadow volumes, and the patches pass by pass. Pictures
 // and depth are those of a renderer without the view cache.
 TEST_F(AvatarCrowdTest, CrowdOnTheCachedPathMatchesExact) {
-  RendererOptions exact_options = Options();
-  exact_options.view_cache = false;
-  absl::StatusOr<std::unique_ptr<Renderer>> made = Renderer::Create(exact_options);
-  ASSERT_TRUE(made.ok()) << made.status();
-  std::unique_ptr<Renderer> exact = std::move(*made);
-  ASSERT_TRUE(exact->SetStaticMesh(mesh_).ok());
-  ASSERT_TRUE(exact->SetProjectors({MakeProjector(projector_, image_, 1)}).ok());
-  ASSERT_TRUE(exact->SetAvatarSequence(avatar::MakeProceduralWalk()).ok());
+  std::unique_ptr<Renderer> exact;
+  ASSERT_NO_FATAL_FAILURE(MakeExactRenderer(&exact));
   viewer_ = Camera{PinholeIntrinsics::FromFov(kWidth, kHeight, 60), LookAt({-6, 30, 16}, {6, 5, 1})};
   RenderViewer();  // the cache is built without people
   const RenderStats built = renderer_->stats();
@@ -198,14 +197,8 @@ TEST_F(AvatarCrowdTest, CrowdOnTheCachedPathMatchesExact) {
 // shadows on the ground tested inside shadow volumes cut where the static surface behind them
 // ends. The people and their shadows on the ground are those of a renderer without the view cache.
 TEST_F(AvatarCrowdTest, FewPeopleAndTheirShadowsOnTheCachedPathMatchExact) {
-  RendererOptions exact_options = Options();
-  exact_options.view_cache = false;
-  absl::StatusOr<std::unique_ptr<Renderer>> made = Renderer::Create(exact_options);
-  ASSERT_TRUE(made.ok()) << made.status();
-  std::unique_ptr<Renderer> exact = std::move(*made);
-  ASSERT_TRUE(exact->SetStaticMesh(mesh_).ok());
-  ASSERT_TRUE(exact->SetProjectors({MakeProjector(projector_, image_, 1)}).ok());
-  ASSERT_TRUE(exact->SetAvatarSequence(avatar::MakeProceduralWalk()).ok());
+  std::unique_ptr<Renderer> exact;
+  ASSERT_NO_FATAL_FAILURE(MakeExactRenderer(&exact));
   viewer_ = Camera{PinholeIntrinsics::FromFov(kWidth, kHeight, 60), LookAt({-6, 30, 16}, {6, 5, 1})};
   const std::vector<uint8_t> empty = RenderViewer();  // the cache is built without people
   const std::vector<float> empty_depth = Depth(viewer_);
