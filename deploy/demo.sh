@@ -163,7 +163,9 @@ if [ -n "${DISPLAY:-}" ] && [ "${AVE_DEMO_HEADLESS:-0}" != 1 ]; then
   echo "demo: opening the viewer window (close it to stop)"
   # Waits for the first frames so the window opens on live video.
   sleep 2
-  "$bin/ave-viewer" --server "$server" --snapshot "$out/quad.png" --frames "${AVE_VIEWER_FRAMES:-0}" 2>"$out/viewer.log" ||
+  # AVE_VIEWER_ARGS: more ave-viewer flags for the window (e.g. --replay-rate 0.25), split on spaces.
+  # shellcheck disable=SC2086
+  "$bin/ave-viewer" --server "$server" --snapshot "$out/quad.png" --frames "${AVE_VIEWER_FRAMES:-0}" ${AVE_VIEWER_ARGS:-} 2>"$out/viewer.log" ||
     { tail -5 "$out/viewer.log" >&2; echo "demo: ave-viewer failed" >&2; exit 1; }
 else
   echo "demo: no DISPLAY, rendering headless"

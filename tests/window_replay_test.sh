@@ -5,14 +5,17 @@
 #   r        opens the panel's Replay section (the viewer logs where its time line and "live" are)
 #   a left drag on the time line from its right end ("now") to its left end, released there: a seek
 #            back (to the earliest recorded moment, once the recording is 20 s long)
-#   p        a snapshot while the replay plays
+#   a click on "pause" as soon as the replay shows its first recorded moment, then p: a snapshot of
+#            the paused replay (the window's replay rate is 0.25x, so the pause lands within seconds
+#            of recorded time of the seek however slow the machine is)
 #   a click on "live", then p: a snapshot back on live; Esc closes the window
 # and checks, from what the viewer and the server write (not from time): the viewer logged the seek
 # from the time line to a moment at least 18 s before the drag and then showed recorded time from
-# it; the server audited that Replay request by the viewer's token with the same start; "live" (the
-# button, not the replay running out) took the viewer back to live; the replay snapshot's time line
-# has the yellow replay playhead and no red live one, the live snapshot the red one at the right end;
-# the replay snapshot (the recording's first moment) shows at most a quarter of live's object paths.
+# it; the server audited that Replay request by the viewer's token with the same start; the pause
+# held a recorded moment after the seek; "live" (the button, not the replay running out) took the
+# viewer back to live; the replay snapshot's time line has the yellow replay playhead and no red live
+# one, the live snapshot the red one at the right end; the replay snapshot (paused near the
+# recording's first moment) shows at most a quarter of live's object paths.
 set -euo pipefail
 root=$1
 build=$2
@@ -85,6 +88,14 @@ sleep 0.3
 xdotool mouseup 1
 wait_for 'viewer: (replay from .*\(time line\)|live \()' 300 >/dev/null || give_up "the drag on the time line did nothing"
 wait_for 'viewer: replaying recorded time' 300 >/dev/null || give_up "the replay showed no recorded moment"
+# Pause where the replay is, so the snapshot shows a moment near the seek however late 'p' lands.
+layout=$(grep 'viewer: replay time line at' "$log" | tail -1)
+read -r px py pw ph < <(echo "$layout" | sed -n 's/.*pause button at x \([0-9-]*\) y \([0-9-]*\) w \([0-9]*\) h \([0-9]*\) px.*/\1 \2 \3 \4/p')
+[ -n "${ph:-}" ] || give_up "unreadable layout line: $layout"
+xdotool mousemove --window "$win" $((px + pw / 2)) $((py + ph / 2))
+sleep 0.3
+xdotool click 1
+wait_for 'viewer: paused at recorded time' 300 >/dev/null || give_up "the click on 'pause' did nothing"
 snapshot replay
 layout=$(grep 'viewer: replay time line at' "$log" | tail -1)
 read -r lx ly lw lh < <(echo "$layout" | sed -n 's/.*live button at x \([0-9-]*\) y \([0-9-]*\) w \([0-9]*\) h \([0-9]*\) px.*/\1 \2 \3 \4/p')
@@ -108,7 +119,7 @@ cat >"$out/session.sh" <<SH
 # Last resort: a viewer still open after three minutes is closed (the test then fails on its checks).
 ( sleep 180; pkill -f -- "--snapshot $out/window/quad.png" ) >/dev/null 2>&1 &
 AVE_SKIP_DEPS=1 AVE_SKIP_BUILD=1 AVE_BUILD_DIR="$build" AVE_DEMO_OUT="$out/window" AVE_DEMO_FPS=5 \
-  AVE_VIEWER_FRAMES=0 timeout 210 bash "$root/deploy/demo.sh"
+  AVE_VIEWER_FRAMES=0 AVE_VIEWER_ARGS="--replay-rate 0.25" timeout 210 bash "$root/deploy/demo.sh"
 SH
 chmod +x "$out/session.sh"
 "$root/tests/with_xvfb.sh" "$out/session.sh" >"$out/demo.log" 2>&1 ||
@@ -138,6 +149,11 @@ shown = re.search(r'viewer: replaying recorded time (\d+) ns', after)
 assert shown, 'no recorded moment shown after the seek'
 shown_ns = int(shown.group(1))
 assert from_ns <= shown_ns < from_ns + 10e9, f'the first moment shown ({shown_ns}) is not the one sought ({from_ns})'
+paused = re.search(r'viewer: paused at recorded time (\d+) ns', after)
+assert paused, 'no pause logged after the seek'
+paused_ns = int(paused.group(1))
+print(f'pause: {(paused_ns - from_ns) / 1e9:.1f} s of recorded time after the seek')
+assert from_ns <= paused_ns, f'the pause ({paused_ns}) is before the seek ({from_ns})'
 live = re.search(r'viewer: live \(([^)]*)\)', after)
 assert live and live.group(1) == 'live button', f'back to live by {live.group(1) if live else "nothing"}, not the live button'
 

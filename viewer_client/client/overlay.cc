@@ -377,6 +377,8 @@ void ReplaySection(OverlayState& state) {
   if (ImGui::Button("play")) state.replay_command = Command::kPlay;
   ImGui::SameLine();
   if (ImGui::Button("pause")) state.replay_command = Command::kPause;
+  const ImVec2 pause_min = ImGui::GetItemRectMin(), pause_size = ImGui::GetItemRectSize();
+  state.pause_button_rect_px = {pause_min.x, pause_min.y, pause_size.x, pause_size.y};
   ImGui::SameLine();
   if (ImGui::Button("live")) state.replay_command = Command::kLive;
   const ImVec2 live_min = ImGui::GetItemRectMin(), live_size = ImGui::GetItemRectSize();

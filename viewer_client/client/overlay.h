@@ -55,7 +55,8 @@ struct OverlayState {
   int timeline_zoom = 1;  // index of the shown span: 1 min, 10 min, 1 h, everything recorded
   bool open_replay = false;  // set: the Replay section opens on the next panel (then cleared)
   std::array<float, 4> timeline_rect_px{};  // where the time line was last drawn: x, y, width, height
-  std::array<float, 4> live_button_rect_px{};  // where the "live" button was last drawn (same form)
+  std::array<float, 4> live_button_rect_px{};   // where the "live" button was last drawn (same form)
+  std::array<float, 4> pause_button_rect_px{};  // where the "pause" button was last drawn (same form)
 };
 
 // Figures the panel shows.

@@ -240,6 +240,7 @@ class Session {
     for (auto& c : clients_) c->Start(subscribe_);
     replaying_ = subscribe_.replay();
     if (replaying_) state_.replay_status = "replay";
+    state_.replay_rate = options_.replay_rate;  // the panel's rate starts at --replay-rate
     return absl::OkStatus();
   }
 
@@ -356,6 +357,8 @@ class Session {
       for (auto& c : clients_) c->Stop();
       paused_ = true;
       state_.replay_status = "paused";
+      AVE_LOG(INFO) << "viewer: paused at recorded time " << first.replay_time_ns() << " ns ("
+                    << absl::StrFormat("%.1f", (now_ns - first.replay_time_ns()) * 1e-9) << " s before now)";
       return;
     }
     if (command == Command::kRate && (!replaying_ || paused_)) return;  // the next play takes it
@@ -393,18 +396,21 @@ class Session {
     }
   }
 
-  // Where the Replay section's time line and "live" button are in the window, logged when they
-  // appear or move (whole pixels): what an operator's pointer (or a script driving it) aims at.
+  // Where the Replay section's time line and "live" and "pause" buttons are in the window, logged
+  // when they appear or move (whole pixels): what an operator's pointer (or a script driving it) aims at.
   void LogReplayLayout() {
-    std::array<int, 8> px{};
+    std::array<int, 12> px{};
     for (int i = 0; i < 4; ++i) {
       px[i] = static_cast<int>(std::lround(state_.timeline_rect_px[i]));
       px[4 + i] = static_cast<int>(std::lround(state_.live_button_rect_px[i]));
+      px[8 + i] = static_cast<int>(std::lround(state_.pause_button_rect_px[i]));
     }
     if (px == logged_replay_px_ || px[2] <= 0) return;
     logged_replay_px_ = px;
-    AVE_LOG(INFO) << absl::StrFormat("viewer: replay time line at x %d y %d w %d h %d px; live button at x %d y %d w %d h %d px",
-                                     px[0], px[1], px[2], px[3], px[4], px[5], px[6], px[7]);
+    AVE_LOG(INFO) << absl::StrFormat(
+        "viewer: replay time line at x %d y %d w %d h %d px; live button at x %d y %d w %d h %d px; "
+        "pause button at x %d y %d w %d h %d px",
+        px[0], px[1], px[2], px[3], px[4], px[5], px[6], px[7], px[8], px[9], px[10], px[11]);
   }
 
   // The time line's spans, asked of the first server every 2 s off the render thread; a server
@@ -652,7 +658,7 @@ class Session {
   bool replaying_ = false, paused_ = false;  // the panel's replay (issue 18)
   bool panel_replay_ = false;  // started from the panel (to the time asked): live once it ends
   bool replay_first_logged_ = false;  // its first recorded moment shown was logged
-  std::array<int, 8> logged_replay_px_{};  // the time line and live button rectangles last logged
+  std::array<int, 12> logged_replay_px_{};  // the time line, live and pause button rectangles last logged
   bool auto_locked_ = false;
   std::optional<DisplayOptions> applied_display_;
   std::vector<std::unique_ptr<SceneClient>> clients_;
