@@ -15,7 +15,7 @@ TEST(Camera, GlMatricesAgreeWithPinholeProjection) {
   k.cy = 250.75;
   const Rigid3d world_from_camera = LookAt({10, -20, 15}, {30, 40, 0});
   const Eigen::Matrix4d clip_from_world = GlProjection(k, 0.5, 500) * GlViewFromWorld(world_from_camera);
-  for (const Eigen::Vector3d p : {Eigen::Vector3d(30, 40, 0), Eigen::Vector3d(25, 35, 2), Eigen::Vector3d(12, 30, -1)}) {
+  for (const Eigen::Vector3d& p : {Eigen::Vector3d(30, 40, 0), Eigen::Vector3d(25, 35, 2), Eigen::Vector3d(12, 30, -1)}) {
     const auto uv = ProjectToPixel(k, world_from_camera.Inverse() * p);
     ASSERT_TRUE(uv.has_value());
     const Eigen::Vector4d clip = clip_from_world * p.homogeneous();
@@ -35,7 +35,7 @@ TEST(Camera, PointsBehindTheCameraDoNotProject) {
 }
 
 TEST(Camera, LookingStraightDownOrUpStaysFiniteAndOrthonormal) {
-  for (const Eigen::Vector3d target : {Eigen::Vector3d(0, 0, -10), Eigen::Vector3d(0, 0, 10), Eigen::Vector3d(0, 0, 0)}) {
+  for (const Eigen::Vector3d& target : {Eigen::Vector3d(0, 0, -10), Eigen::Vector3d(0, 0, 10), Eigen::Vector3d(0, 0, 0)}) {
     const Rigid3d pose = LookAt({0, 0, 0.0}, target);
     const Eigen::Matrix3d r = pose.rotation.toRotationMatrix();
     ASSERT_TRUE(r.allFinite());
@@ -49,7 +49,7 @@ TEST(Camera, LookingStraightDownOrUpStaysFiniteAndOrthonormal) {
 
 TEST(Camera, PixelRayRoundTrips) {
   const PinholeIntrinsics k = PinholeIntrinsics::FromFov(1920, 1080, 90);
-  for (const Eigen::Vector2d uv : {Eigen::Vector2d(0, 0), Eigen::Vector2d(1919, 1079), Eigen::Vector2d(960.3, 10)}) {
+  for (const Eigen::Vector2d& uv : {Eigen::Vector2d(0, 0), Eigen::Vector2d(1919, 1079), Eigen::Vector2d(960.3, 10)}) {
     const auto back = ProjectToPixel(k, 7.5 * PixelRay(k, uv));
     ASSERT_TRUE(back.has_value());
     EXPECT_NEAR((*back - uv).norm(), 0, 1e-9);

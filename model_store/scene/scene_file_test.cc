@@ -98,7 +98,7 @@ TEST(SceneFile, EveryPrimitiveRoofIsWhereTheMeshSays) {
     const BoxBuilding& b = campus.buildings[i];
     for (const BuildingPart& part : b.Parts()) {
       const double c = std::cos(part.yaw_rad), s = std::sin(part.yaw_rad);
-      for (const Eigen::Vector2d f : {Eigen::Vector2d(0.013, 0.017), Eigen::Vector2d(0.3, -0.25), Eigen::Vector2d(-0.35, 0.3)}) {
+      for (const Eigen::Vector2d& f : {Eigen::Vector2d(0.013, 0.017), Eigen::Vector2d(0.3, -0.25), Eigen::Vector2d(-0.35, 0.3)}) {
         const double px = f.x() * part.size_m.x(), py = f.y() * part.size_m.y();
         const Eigen::Vector2d xy = part.center_m + Eigen::Vector2d(c * px - s * py, s * px + c * py);
         const auto want = campus.RoofHeightAt(b, xy.x(), xy.y());
@@ -160,8 +160,12 @@ TEST(SceneFile, MaterialsPerTriangle) {
   // Normals of roof triangles point up (a dome's lowest ring is nearly vertical); walls are vertical.
   for (size_t t = 0; t < mesh.TriangleCount(); ++t) {
     const Eigen::Vector3f n = mesh.normals[mesh.indices[3 * t]];
-    if (mesh.triangle_material[t] == SurfaceMaterial::kRoof) ASSERT_GT(n.z(), 0.05f) << "triangle " << t;
-    if (mesh.triangle_material[t] == SurfaceMaterial::kWall) ASSERT_NEAR(n.z(), 0.0f, 1e-4f) << "triangle " << t;
+    if (mesh.triangle_material[t] == SurfaceMaterial::kRoof) {
+      ASSERT_GT(n.z(), 0.05f) << "triangle " << t;
+    }
+    if (mesh.triangle_material[t] == SurfaceMaterial::kWall) {
+      ASSERT_NEAR(n.z(), 0.0f, 1e-4f) << "triangle " << t;
+    }
   }
 }
 

@@ -55,8 +55,11 @@ TEST_F(StudioTruth, ShadowRemovalKeepsTheShadowOutOfTheSilhouettes) {
       ASSERT_TRUE(m.ok());
       iou += MaskIoU(*m, set_->truth_silhouettes[c]) / set_->cameras.size();
     }
-    if (remove) EXPECT_GT(iou, 0.98);
-    else EXPECT_LT(iou, 0.9);  // the floor shadow is taken for the actor
+    if (remove) {
+      EXPECT_GT(iou, 0.98);
+    } else {
+      EXPECT_LT(iou, 0.9);  // the floor shadow is taken for the actor
+    }
   }
 }
 
