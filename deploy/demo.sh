@@ -90,7 +90,8 @@ fi
 # Issue 17: the people walk as 4D avatars reconstructed in the simulated 13+1-camera studio:
 # ave-sim studio renders it, ave-studio segments (shadows removed), carves the visual hull, meshes,
 # textures and finds the walk cycle (walk.avseq), ave-admin put-avatar stores it; the server then
-# gives every tracked person an avatar walking its track. Made once per build folder (about 15 s);
+# gives every tracked person an avatar walking its track. Made once per build folder (about 15 s),
+# and again when ave-sim or ave-studio was rebuilt since (a new studio actor or reconstruction);
 # AVE_DEMO_AVATARS=0 leaves people as boxes and cylinders.
 if [ "${AVE_DEMO_AVATARS:-1}" = 1 ]; then
   avatar_dir=$build/demo-avatar
@@ -98,7 +99,8 @@ if [ "${AVE_DEMO_AVATARS:-1}" = 1 ]; then
   # sequence in a folder of its own and moves it into place under a lock; the other waits for it.
   exec 9>"$build/demo-avatar.lock"
   flock 9
-  if [ ! -s "$avatar_dir/walk.avseq" ]; then
+  if [ ! -s "$avatar_dir/walk.avseq" ] || [ "$bin/ave-sim" -nt "$avatar_dir/walk.avseq" ] ||
+     [ "$bin/ave-studio" -nt "$avatar_dir/walk.avseq" ]; then
     echo "demo: reconstructing the walking avatar in the simulated studio (once per build)"
     studio_tmp=$(mktemp -d "$build/demo-avatar.XXXXXX")
     "$bin/ave-sim" studio --scenario studio --out "$studio_tmp/studio" >/dev/null
