@@ -4,10 +4,15 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <chrono>
 #include <filesystem>
+#include <future>
 #include <memory>
 #include <string>
+#include <thread>
 #include <vector>
+
+#include "absl/status/status.h"
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -127,6 +132,24 @@ inline grpc::Status StreamFrames(v1::SensorService::StubInterface& stub, const v
   stream->WritesDone();
   if (acks) *acks = read;
   return stream->Finish();
+}
+
+// Runs `streamer.Run(stop)` (an agent's camera or LiDAR streamer) on a thread until it returns by
+// itself or `bound` passes, when it is told to stop: whether it ended by itself, and its status.
+struct StreamerRun {
+  bool ended_by_itself = false;
+  absl::Status status;
+};
+template <typename Streamer>
+StreamerRun RunUntilItEnds(Streamer& streamer, std::chrono::milliseconds bound) {
+  std::atomic<bool> stop{false};
+  std::promise<absl::Status> result;
+  std::future<absl::Status> done = result.get_future();
+  std::thread run([&] { result.set_value(streamer.Run(stop)); });
+  const bool ended = done.wait_for(bound) == std::future_status::ready;
+  stop = true;
+  run.join();
+  return {ended, done.get()};
 }
 
 }  // namespace ave::fixtures

@@ -59,19 +59,10 @@ TEST(AgentLimits, DurationEndsTheRunWhileTheServerIsUnreachable) {
   options.backoff_initial = std::chrono::milliseconds(20);
   options.backoff_max = std::chrono::milliseconds(40);
   AgentStreamer streamer(options, std::make_unique<FakeSource>());
-  std::atomic<bool> stop{false}, done{false};
-  absl::Status status;
-  std::thread run([&] {
-    status = streamer.Run(stop);
-    done = true;
-  });
-  for (int i = 0; i < 400 && !done; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(50));  // 20 s at most
-  const bool ended_by_itself = done.load();
-  stop = true;
-  run.join();
-  EXPECT_TRUE(ended_by_itself) << "still running 20 s after a 0.3 s --duration; " << streamer.stats().connects
-                               << " connection attempts";
-  EXPECT_TRUE(status.ok()) << status;
+  const fixtures::StreamerRun run = fixtures::RunUntilItEnds(streamer, std::chrono::seconds(20));
+  EXPECT_TRUE(run.ended_by_itself) << "still running 20 s after a 0.3 s --duration; " << streamer.stats().connects
+                                   << " connection attempts";
+  EXPECT_TRUE(run.status.ok()) << run.status;
   EXPECT_LT(streamer.stats().connects, 100);
   EXPECT_GT(streamer.stats().metadata_buffered, 0);
 }

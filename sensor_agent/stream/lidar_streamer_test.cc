@@ -14,6 +14,7 @@
 
 #include "fusion_server/admin/admin_client.h"
 #include "fusion_server/service/server.h"
+#include "fusion_server/service/test_fixtures.h"
 #include "model_store/common/log.h"
 #include "sensor_agent/sim/scenario.h"
 #include "sensor_agent/stream/lidar_test_fixtures.h"
@@ -261,19 +262,10 @@ TEST(LidarStreamerLimits, DurationEndsTheRunWhileTheServerIsUnreachable) {
   options.backoff_initial = std::chrono::milliseconds(20);
   options.backoff_max = std::chrono::milliseconds(40);
   LidarStreamer streamer(options, WalkerSweeps(), fixtures::TruthFootTracker());
-  std::atomic<bool> stop{false}, done{false};
-  absl::Status status;
-  std::thread run([&] {
-    status = streamer.Run(stop);
-    done = true;
-  });
-  for (int i = 0; i < 400 && !done; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(50));  // 20 s at most
-  const bool ended_by_itself = done.load();
-  stop = true;
-  run.join();
-  EXPECT_TRUE(ended_by_itself) << "still running 20 s after a 0.3 s --duration; " << streamer.stats().connects
-                               << " connection attempts";
-  EXPECT_TRUE(status.ok()) << status;
+  const fixtures::StreamerRun run = fixtures::RunUntilItEnds(streamer, std::chrono::seconds(20));
+  EXPECT_TRUE(run.ended_by_itself) << "still running 20 s after a 0.3 s --duration; " << streamer.stats().connects
+                                   << " connection attempts";
+  EXPECT_TRUE(run.status.ok()) << run.status;
   EXPECT_LT(streamer.stats().connects, 100);
 }
 
