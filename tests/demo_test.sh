@@ -46,14 +46,7 @@ bp_frames=$(sed -n 's/.*"frames_sent":\([0-9]*\).*"frames_per_s":\([0-9.e+-]*\).
 [ "${bp_frames%% *}" -gt 0 ] 2>/dev/null || { echo "FAIL: the backpack agent sent no frames (agent-backpack.out: $(cat "$out/agent-backpack.out"))"; exit 1; }
 echo "backpack agent: frames sent and frames/s: $bp_frames"
 if pgrep -f "$out/ave.db" >/dev/null; then echo "FAIL: a demo process is still running"; exit 1; fi
-# The window path: the same viewer in a GLFW window under a virtual X display, closing itself after
-# a few frames and writing its last frame.
-if command -v Xvfb >/dev/null; then
-  AVE_SKIP_DEPS=1 AVE_SKIP_BUILD=1 AVE_BUILD_DIR=$build AVE_DEMO_OUT=$out/window AVE_DEMO_FPS=5 AVE_VIEWER_FRAMES=20 \
-    "$root/tests/with_xvfb.sh" bash "$root/deploy/demo.sh"
-  test -s "$out/window/quad.png" || { echo "FAIL: the window viewer wrote no quad.png"; exit 1; }
-  grep -q "camera 'cam1' connected" "$out/window/server.log" || { echo "FAIL: window run: cam1 never connected"; exit 1; }
-else
-  echo "FAIL: Xvfb missing (deploy/install-deps.sh installs xvfb)"; exit 1
-fi
+# The window path (the same demo with a GLFW window under Xvfb) is run by ave_window_input_test and
+# ave_window_replay_test, which drive it; running it here as well doubled this test's time (a whole
+# second demo), and under a loaded campaign that pushed it past its hang guard.
 echo "demo: ok"
