@@ -50,6 +50,7 @@ struct Options {
   int seeks = 100;
   int rounds = 3;
   bool concurrent = false;
+  bool direct_io = false;  // the recording servers get --record-direct-io
   std::string plot = "record_bench.png";
   std::string dir;  // recording and stores; default a temporary directory
 };
@@ -64,7 +65,7 @@ std::string Bin(const std::string& name) {
   return (fs::canonical("/proc/self/exe").parent_path() / name).string();
 }
 
-absl::StatusOr<Server> StartServer(const fs::path& dir, const std::string& record_dir) {
+absl::StatusOr<Server> StartServer(const fs::path& dir, const std::string& record_dir, bool direct_io) {
   fs::create_directories(dir);
   const std::string out = (dir / "server.out").string();
   fs::remove(out);
@@ -80,6 +81,7 @@ absl::StatusOr<Server> StartServer(const fs::path& dir, const std::string& recor
     std::vector<std::string> args = {bin, "--listen", "127.0.0.1:0", "--store", store, "--campus-grid", "8",
                                      "--log-level", "warning", "--max-fps-hint", "30", "--metrics-listen", "127.0.0.1:0"};
     if (!record_dir.empty()) args.insert(args.end(), {"--record-dir", record_dir});
+    if (!record_dir.empty() && direct_io) args.push_back("--record-direct-io");
     std::vector<char*> argv;
     for (auto& a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
@@ -274,7 +276,7 @@ int Run(const Options& o) {
       p.recording = recording;
       p.tag = std::string(recording ? "on" : "off") + "_" + std::to_string(r + 1);
       p.dir = dir / p.tag;
-      auto server = StartServer(p.dir, recording ? (p.dir / "rec").string() : "");
+      auto server = StartServer(p.dir, recording ? (p.dir / "rec").string() : "", o.direct_io);
       if (!server.ok()) return server.status();
       p.server = *server;
       return p;
@@ -374,7 +376,7 @@ int Run(const Options& o) {
     }
   }
   // Replay start-up through a server: the Replay call until its first update arrives.
-  auto again = StartServer(on_dir, rec.string());
+  auto again = StartServer(on_dir, rec.string(), o.direct_io);
   if (!again.ok()) return std::cerr << "ave-bench record: " << again.status().message() << "\n", 1;
   // A replay's first update carries every camera's image at the seek point: with many cameras it
   // passes gRPC's default 4 MB receive limit, so allow what the server may send (16 MB).
@@ -426,12 +428,12 @@ int Run(const Options& o) {
   Plot(o.plot, {{"CPU off", median_off}, {"CPU on", median_on}, {"MB/s", mb_per_s}}, seek_ms);
   char json[900];
   std::snprintf(json, sizeof json,
-                "{\"streams\":%d,\"fps\":%.1f,\"seconds\":%.1f,\"rounds\":%d,\"concurrent\":%d,\"record_drops\":%.0f,\"cpu_off_pct\":%.1f,"
+                "{\"streams\":%d,\"fps\":%.1f,\"seconds\":%.1f,\"rounds\":%d,\"concurrent\":%d,\"direct_io\":%d,\"record_drops\":%.0f,\"cpu_off_pct\":%.1f,"
                 "\"cpu_on_pct\":%.1f,\"cpu_overhead_pct\":%.1f,\"cpu_overhead_min_pct\":%.1f,\"cpu_overhead_max_pct\":%.1f,"
                 "\"mb_per_s\":%.2f,\"seek_p50_ms\":%.2f,"
                 "\"seek_p99_ms\":%.2f,\"seek_no_warmup_p99_ms\":%.2f,\"replay_startup_ms\":%.2f,\"index_bytes_per_hour\":%.0f,"
                 "\"frames_indexed\":%lld,\"recorder_cpu_pct\":%.2f,\"loadavg_1m\":%.2f}",
-                o.streams, o.fps, o.seconds, o.rounds, o.concurrent ? 1 : 0, drops, median_off, median_on, overhead_pct,
+                o.streams, o.fps, o.seconds, o.rounds, o.concurrent ? 1 : 0, o.direct_io ? 1 : 0, drops, median_off, median_on, overhead_pct,
                 *std::min_element(overheads.begin(), overheads.end()), *std::max_element(overheads.begin(), overheads.end()),
                 mb_per_s, Percentile(seek_ms, 0.5), Percentile(seek_ms, 0.99), Percentile(probe_ms, 0.99),
                 Percentile(startup_ms, 0.5), index_bytes_per_hour, static_cast<long long>(frames_all), recorder_cpu_pct, LoadAverage());
@@ -450,6 +452,7 @@ Runner AddRecordBench(CLI::App& sub) {
   sub.add_flag("--concurrent", o->concurrent,
                "run each round's off and on servers at once, each under its own ave-loadgen (the same moment's "
                "machine load on both; twice the load on the machine)");
+  sub.add_flag("--direct-io", o->direct_io, "the recording servers write with O_DIRECT (ave-server --record-direct-io)");
   sub.add_option("--rounds", o->rounds, "rounds of an off and an on phase, in alternating order")
       ->check(CLI::Range(1, 100))
       ->capture_default_str();
