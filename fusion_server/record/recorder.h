@@ -70,7 +70,8 @@ struct RecorderOptions {
   // allocation per 4 KB in the writer, no dirty pages for the kernel's flusher to write back. The
   // sync and commit order is the same (the sync still writes the inode and flushes the device
   // cache). Replay then reads recent frames from the disk, not from memory. A filesystem that
-  // refuses O_DIRECT (or an aligned write) gets buffered writes, with one log line.
+  // refuses O_DIRECT (or an aligned write) gets buffered writes, with one log line. Each open
+  // segment then holds a second descriptor (the O_DIRECT one).
   bool direct_io = false;
   std::chrono::milliseconds objects_period{500};     // fused objects recorded at most this often
   // The fused objects now (a SceneUpdate holding only objects, server time in server_time_ns);
