@@ -85,6 +85,10 @@ int main(int argc, char** argv) {
                  "recorder: syncfs (one sync of the recording's filesystem per period) or fdatasync (one per "
                  "segment; bounds the flush time on a disk shared with heavy writers)")
       ->capture_default_str()->check(CLI::IsMember({"syncfs", "fdatasync"}));
+  bool record_direct_io = false;
+  app.add_flag("--record-direct-io", record_direct_io,
+               "recorder: write segment batches with O_DIRECT from an aligned buffer (no page cache copy or "
+               "writeback of the JPEGs; replay reads recent frames from the disk)");
   app.add_option("--log-level", log_level, "debug, info, warning or error")->check(CLI::IsMember({"debug", "info", "warning", "error"}));
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-server")) return *exit_code;
   ave::log::MinLevel() = log_level == "debug" ? ave::log::Level::kDEBUG
@@ -122,6 +126,7 @@ int main(int argc, char** argv) {
   options.record_max_bytes = static_cast<int64_t>(*max_bytes);
   options.record_sync_period = std::chrono::milliseconds(record_sync_ms);
   options.record_sync_per_file = record_sync == "fdatasync";
+  options.record_direct_io = record_direct_io;
 
   // Signals are taken by a waiting thread, so shutdown runs outside any signal handler.
   sigset_t signals;

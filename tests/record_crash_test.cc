@@ -5,8 +5,8 @@
 // unindexed tails are cut (every segment file is exactly as long as its indexed bytes) and
 // recording goes on; the newest frame each agent's acks called recorded (SensorAck.recorded_sequence)
 // before a kill is in the index. AVE_RECORD_CRASH_KILLS gives the full form (10 kills).
-// The server runs alternately with the defaults (--record-sync syncfs, --record-sync-ms 500) and
-// with fdatasync every 250 ms.
+// The server runs in turn with the defaults (--record-sync syncfs, --record-sync-ms 500), with
+// fdatasync every 250 ms, and with the defaults plus --record-direct-io (O_DIRECT batches).
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <signal.h>
@@ -18,6 +18,8 @@
 #include <cstdlib>
 #include <limits>
 #include <filesystem>
+#include <string>
+#include <vector>
 #include <fstream>
 #include <iostream>
 #include <thread>
@@ -66,9 +68,11 @@ class RecordingServer {
  public:
   RecordingServer(fs::path dir, int port) : dir_(std::move(dir)), port_(port) {}
   ~RecordingServer() { Kill(SIGKILL); }
-  // `per_file`: --record-sync fdatasync (one fdatasync per segment) every 250 ms instead of the
-  // defaults (syncfs every 500 ms).
-  void Start(bool per_file = false) {
+  // kPerFile: --record-sync fdatasync (one fdatasync per segment) every 250 ms instead of the
+  // defaults (syncfs every 500 ms); kDirect: the defaults plus --record-direct-io.
+  enum Mode { kDefaults, kPerFile, kDirect };
+  void Start(Mode mode = kDefaults) {
+    const bool per_file = mode == kPerFile;
     pid_ = ::fork();
     if (pid_ == 0) {
       std::freopen((dir_ / "server.log").c_str(), "a", stderr);
@@ -80,9 +84,14 @@ class RecordingServer {
       ::setenv("AVE_SENSOR_TOKEN", "sensor", 1);
       ::setenv("AVE_VIEWER_TOKEN", "viewer", 1);
       ::setenv("AVE_ADMIN_TOKEN", "admin", 1);
-      execl(bin.c_str(), bin.c_str(), "--listen", listen.c_str(), "--store", store.c_str(), "--campus-grid", "8",
-            "--record-dir", rec.c_str(), "--record-sync", per_file ? "fdatasync" : "syncfs", "--record-sync-ms",
-            per_file ? "250" : "500", static_cast<char*>(nullptr));
+      std::vector<std::string> args = {bin, "--listen", listen, "--store", store, "--campus-grid", "8", "--record-dir", rec,
+                                       "--record-sync", per_file ? "fdatasync" : "syncfs", "--record-sync-ms",
+                                       per_file ? "250" : "500"};
+      if (mode == kDirect) args.push_back("--record-direct-io");
+      std::vector<char*> argv;
+      for (std::string& a : args) argv.push_back(a.data());
+      argv.push_back(nullptr);
+      execv(bin.c_str(), argv.data());
       std::_Exit(127);
     }
   }
@@ -223,7 +232,8 @@ TEST(RecordCrash, KillNineWhileRecordingLeavesIndexAndSegmentsInAgreement) {
     // Acked as recorded means stored: the newest SensorAck.recorded_sequence each agent received
     // before the kill names a frame the index still holds.
     acked_recorded += CheckAckedRecordedFramesIndexed(dir, agents, kill);
-    server.Start(/*per_file=*/kill % 2 == 0);  // both sync methods are killed mid-write
+    // Each mode is killed mid-write: defaults (kill 0), fdatasync (1), O_DIRECT (2), ...
+    server.Start(static_cast<RecordingServer::Mode>((kill + 1) % 3));
     ASSERT_TRUE(server.WaitServing(std::chrono::seconds(20))) << "server did not come back after kill " << kill;
     CheckIndexAgainstSegments(dir, true);
     indexed = after_kill;

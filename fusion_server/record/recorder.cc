@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <climits>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <set>
@@ -203,6 +204,7 @@ Recorder::~Recorder() {
   wake_.notify_all();
   if (thread_.joinable()) thread_.join();
   if (dir_fd_ >= 0) ::close(dir_fd_);
+  std::free(direct_buf_);
 }
 
 int64_t Recorder::NowNs() const {
@@ -418,7 +420,9 @@ Recorder::OpenSegment* Recorder::SegmentFor(const std::string& sensor_id, int64_
   int64_t name_ns = capture_server_ns;
   for (;; ++name_ns) {  // unique even when a camera's clock repeats a start time
     seg.row.path = absl::StrCat(sensor_id, "/", name_ns, ".seg");
-    seg.fd = ::open((fs::path(options_.dir) / seg.row.path).c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+    // Direct writes read back the partial block at the end when they do not hold it: O_RDWR.
+    seg.fd = ::open((fs::path(options_.dir) / seg.row.path).c_str(),
+                    (options_.direct_io ? O_RDWR : O_WRONLY) | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
     if (seg.fd >= 0 || errno != EEXIST) break;
   }
   if (seg.fd < 0) {
@@ -433,6 +437,14 @@ Recorder::OpenSegment* Recorder::SegmentFor(const std::string& sensor_id, int64_
   SyncDir(sensor_dir);  // the new name survives a power cut once its rows are committed
   struct stat seg_stat {};
   seg.same_fs = ::fstat(seg.fd, &seg_stat) == 0 && seg_stat.st_dev == dir_dev_;
+  if (options_.direct_io && direct_ok_) {
+    seg.direct_fd = ::open((fs::path(options_.dir) / seg.row.path).c_str(), O_WRONLY | O_DIRECT | O_CLOEXEC);
+    if (seg.direct_fd < 0) {
+      direct_ok_ = false;
+      AVE_LOG(WARNING) << "recording: O_DIRECT refused in '" << sensor_dir.string() << "' (" << std::strerror(errno)
+                       << "), writing through the page cache";
+    }
+  }
   return &open_.emplace(sensor_id, std::move(seg)).first->second;
 }
 
@@ -520,7 +532,8 @@ void Recorder::WritePending(OpenSegment& seg) {
     // A failed reservation (a full disk) is not retried for these bytes: the write says whether they fit.
     seg.allocated = want;
   }
-  const int err = WriteAllV(seg.fd, iov, seg.pending_from);
+  int err = 0;
+  if (seg.direct_fd < 0 || !WritePendingDirect(seg, &err)) err = WriteAllV(seg.fd, iov, seg.pending_from);
   const size_t frames = seg.hold.size();
   seg.hold.clear();
   seg.pending_bytes = 0;
@@ -544,10 +557,71 @@ void Recorder::WritePending(OpenSegment& seg) {
   }
 }
 
+bool Recorder::WritePendingDirect(OpenSegment& seg, int* err) {
+  // [block_start, end) rounded up to whole blocks: the partial block before the batch (already
+  // written: the same bytes again), the batch's frames, zeros after them (the next batch's bytes
+  // replace them; the file's length past `written` is cut when the segment closes, or by Open's
+  // repair after a crash, as for fallocate's reservation).
+  const int64_t block_start = seg.pending_from / kDirectAlign * kDirectAlign;
+  const int64_t end = seg.pending_from + seg.pending_bytes;
+  const size_t head = static_cast<size_t>(seg.pending_from - block_start);
+  const size_t length = static_cast<size_t>((end - block_start + kDirectAlign - 1) / kDirectAlign * kDirectAlign);
+  if (length > direct_cap_) {
+    void* buf = nullptr;
+    if (::posix_memalign(&buf, kDirectAlign, length) != 0) return false;
+    std::free(direct_buf_);
+    direct_buf_ = static_cast<char*>(buf);
+    direct_cap_ = length;
+  }
+  char* out = direct_buf_;
+  if (head > 0) {
+    if (seg.tail_from == block_start && seg.tail.size() == head) {
+      std::memcpy(out, seg.tail.data(), head);
+    } else if (::pread(seg.fd, out, head, block_start) != static_cast<ssize_t>(head)) {
+      return false;  // (a buffered write since, e.g. a full disk's probe, and the block unreadable)
+    }
+  }
+  size_t at = head;
+  for (const auto& frame : seg.hold) {
+    std::memcpy(out + at, frame->jpeg().data(), frame->jpeg().size());
+    at += frame->jpeg().size();
+  }
+  std::memset(out + at, 0, length - at);
+  for (size_t done = 0; done < length;) {
+    const ssize_t n = ::pwrite(seg.direct_fd, out + done, length - done, block_start + static_cast<int64_t>(done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0 && errno == EINVAL && done == 0) {
+      // The filesystem or device wants another alignment: this segment goes through the page cache.
+      AVE_LOG(WARNING) << "recording: O_DIRECT write to '" << seg.row.path << "' refused (" << std::strerror(errno)
+                       << "), writing through the page cache";
+      ::close(seg.direct_fd);
+      seg.direct_fd = -1;
+      direct_ok_ = false;
+      return false;
+    }
+    if (n <= 0) {
+      *err = n < 0 ? errno : EIO;
+      seg.tail_from = -1;
+      return true;
+    }
+    done += static_cast<size_t>(n);
+  }
+  direct_writes_.fetch_add(1, std::memory_order_relaxed);
+  seg.tail_from = end / kDirectAlign * kDirectAlign;
+  seg.tail.assign(out + (seg.tail_from - block_start), static_cast<size_t>(end - seg.tail_from));
+  *err = 0;
+  return true;
+}
+
 void Recorder::CloseFd(OpenSegment& seg) {
+  if (seg.direct_fd >= 0) {
+    ::close(seg.direct_fd);
+    seg.direct_fd = -1;
+  }
   if (seg.fd < 0) return;
-  // At the same size, ftruncate still frees the blocks fallocate reserved past the end.
-  if (seg.allocated > seg.written && ::ftruncate(seg.fd, seg.written) != 0) {
+  // At the same size, ftruncate still frees the blocks fallocate reserved past the end; after
+  // direct writes it also cuts the zeros of the last block.
+  if ((seg.allocated > seg.written || options_.direct_io) && ::ftruncate(seg.fd, seg.written) != 0) {
     AVE_LOG(WARNING) << "recording: cannot release the reserved tail of '" << seg.row.path << "': " << std::strerror(errno);
   }
   ::close(seg.fd);
@@ -723,6 +797,7 @@ RecorderStats Recorder::Stats() const {
   s.segments_deleted = segments_deleted_.load();
   s.commits = commits_.load();
   s.syncs = syncs_.load();
+  s.direct_writes = direct_writes_.load();
   s.bytes_on_disk = bytes_on_disk_.load();
   s.disk_full = disk_full_.load();
   {
@@ -748,6 +823,8 @@ void Recorder::RenderPrometheus(std::string& out) const {
        s.disk_full_events);
   line("ave_record_write_errors_total", "counter", "Frames lost to other write, sync or index errors.", s.write_errors);
   line("ave_record_syncs_total", "counter", "syncfs or fdatasync calls that made segment bytes durable.", s.syncs);
+  line("ave_record_direct_writes_total", "counter", "O_DIRECT writes of segment batches (--record-direct-io).",
+       s.direct_writes);
   line("ave_record_segments_deleted_total", "counter", "Segments deleted by retention.", s.segments_deleted);
   line("ave_record_disk_full", "gauge", "1 while recording is stopped for a full disk or budget.", s.disk_full ? 1 : 0);
   line("ave_record_bytes_on_disk", "gauge", "Indexed segment bytes on disk.", s.bytes_on_disk);

@@ -64,6 +64,15 @@ struct RecorderOptions {
   // dirty on that filesystem: on a disk shared with heavy writers, kPerFile bounds the flush time.
   enum class SyncMethod { kFilesystem, kPerFile };
   SyncMethod sync_method = SyncMethod::kFilesystem;
+  // `ave-server --record-direct-io`: write each segment's batch with O_DIRECT from a page-aligned
+  // buffer (the batch's frames copied into it; the partial block at the segment's end rewritten
+  // with the next batch), past the page cache: no page-cache pages, buffer heads or delayed block
+  // allocation per 4 KB in the writer, no dirty pages for the kernel's flusher to write back. The
+  // sync and commit order is the same (the sync still writes the inode and flushes the device
+  // cache). Replay then reads recent frames from the disk, not from memory. A filesystem that
+  // refuses O_DIRECT (or an aligned write) gets buffered writes, with one log line. Each open
+  // segment then holds a second descriptor (the O_DIRECT one).
+  bool direct_io = false;
   std::chrono::milliseconds objects_period{500};     // fused objects recorded at most this often
   // The fused objects now (a SceneUpdate holding only objects, server time in server_time_ns);
   // called on the writer thread once per objects_period. Empty: objects are not recorded.
@@ -83,6 +92,7 @@ struct RecorderStats {
   uint64_t segments_deleted = 0;
   uint64_t commits = 0;
   uint64_t syncs = 0;  // syncfs or fdatasync calls made to commit segment bytes
+  uint64_t direct_writes = 0;  // O_DIRECT writes of segment batches (RecorderOptions::direct_io)
   int64_t queue_items = 0;
   int64_t bytes_on_disk = 0;  // committed segment bytes
   bool disk_full = false;
@@ -137,6 +147,11 @@ class Recorder {
     // after a crash, by Open's repair.
     int64_t allocated = 0;
     bool same_fs = false;  // on the record dir's filesystem: one syncfs covers it
+    // direct_io: a second descriptor with O_DIRECT, and the bytes of the partial block at the end
+    // of the last direct write (from tail_from), which the next batch's aligned write repeats.
+    int direct_fd = -1;
+    int64_t tail_from = -1;
+    std::string tail;
     std::vector<std::shared_ptr<const v1::SensorFrame>> hold;
   };
   Recorder(RecorderOptions options, std::unique_ptr<RecordIndex> index);
@@ -151,6 +166,9 @@ class Recorder {
   // Writes a segment's pending frames (WriteItem places them); on failure truncates back and drops
   // their rows from the batch (counted as skipped for a full disk, else as write errors).
   void WritePending(OpenSegment& seg);
+  // direct_io: the pending frames in one aligned O_DIRECT write; false when it could not be tried
+  // (the caller writes them buffered), else *err is the write's errno (0: written).
+  bool WritePendingDirect(OpenSegment& seg, int* err);
   void CloseFd(OpenSegment& seg);  // releases the unused reservation, then closes
   // mu_ held: the queue holds enough to wake the writer before its flush time.
   bool WakeDue() const {
@@ -161,6 +179,7 @@ class Recorder {
   static constexpr int64_t kPendingMaxBytes = 1 << 20;  // per segment, then written at once
   static constexpr size_t kMaxIov = 256;
   static constexpr int64_t kReserveBytes = 4 << 20;  // fallocate step
+  static constexpr int64_t kDirectAlign = 4096;     // O_DIRECT offset, length and buffer alignment
   // Deletes segments past max_age, then the oldest closed ones while the recording plus
   // `need_bytes` exceeds max_bytes.
   void RunRetention(int64_t need_bytes = 0);
@@ -194,12 +213,15 @@ class Recorder {
   int dir_fd_ = -1;      // the record dir, for syncfs
   dev_t dir_dev_ = 0;
   bool syncfs_ok_ = true;  // false once syncfs says the kernel cannot
+  bool direct_ok_ = true;  // false once the filesystem refused O_DIRECT
+  char* direct_buf_ = nullptr;  // page-aligned staging buffer for direct writes
+  size_t direct_cap_ = 0;
   bool probe_ = false;  // while full: the next frame may try to write (set once per flush)
   int64_t last_retention_ns_ = 0;
 
   std::atomic<uint64_t> frames_recorded_{0}, bytes_recorded_{0}, sweeps_recorded_{0}, objects_recorded_{0};
   std::atomic<uint64_t> queue_drops_{0}, disk_full_skips_{0}, disk_full_events_{0}, write_errors_{0};
-  std::atomic<uint64_t> segments_deleted_{0}, commits_{0}, syncs_{0};
+  std::atomic<uint64_t> segments_deleted_{0}, commits_{0}, syncs_{0}, direct_writes_{0};
   std::atomic<int64_t> bytes_on_disk_{0};
   std::atomic<bool> disk_full_{false};
   std::thread thread_;

@@ -108,6 +108,7 @@ absl::Status StartRecorder(FusionServer::Impl& impl) {
   ro.max_age = impl.options.record_retention;
   ro.max_bytes = impl.options.record_max_bytes;
   ro.flush_period = impl.options.record_sync_period;
+  ro.direct_io = impl.options.record_direct_io;
   ro.sync_method = impl.options.record_sync_per_file ? record::RecorderOptions::SyncMethod::kPerFile
                                                      : record::RecorderOptions::SyncMethod::kFilesystem;
   SceneState* state = &impl.state;

@@ -50,6 +50,7 @@ struct Options {
   int seeks = 100;
   int rounds = 3;
   bool concurrent = false;
+  bool direct_io = false;  // the recording servers get --record-direct-io
   std::string plot = "record_bench.png";
   std::string dir;  // recording and stores; default a temporary directory
 };
@@ -64,7 +65,7 @@ std::string Bin(const std::string& name) {
   return (fs::canonical("/proc/self/exe").parent_path() / name).string();
 }
 
-absl::StatusOr<Server> StartServer(const fs::path& dir, const std::string& record_dir) {
+absl::StatusOr<Server> StartServer(const fs::path& dir, const std::string& record_dir, bool direct_io) {
   fs::create_directories(dir);
   const std::string out = (dir / "server.out").string();
   fs::remove(out);
@@ -80,6 +81,7 @@ absl::StatusOr<Server> StartServer(const fs::path& dir, const std::string& recor
     std::vector<std::string> args = {bin, "--listen", "127.0.0.1:0", "--store", store, "--campus-grid", "8",
                                      "--log-level", "warning", "--max-fps-hint", "30", "--metrics-listen", "127.0.0.1:0"};
     if (!record_dir.empty()) args.insert(args.end(), {"--record-dir", record_dir});
+    if (!record_dir.empty() && direct_io) args.push_back("--record-direct-io");
     std::vector<char*> argv;
     for (auto& a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
@@ -257,6 +259,11 @@ int Run(const Options& o) {
   // overhead is the median of the rounds' on/off ratios, so one disturbed round does not decide it.
   std::vector<double> cpu_off, cpu_on, overheads;
   double record_drops = 0, full_skips = 0, frames_in = 0, fps_off = 0, fps_on = 0;
+  // The recorder's queue right after a recording phase's ave-loadgen exits (largest over the
+  // rounds): its writes, syncs and commits come after ave-loadgen's CPU window, so the on phase's
+  // CPU leaves them out. Near 0 (at most a flush period's frames, as many as the window's start
+  // carried in) the comparison is fair; a writer falling behind on a loaded machine flatters recording.
+  double queue_at_end = 0;
   double recorder_cpu_s = 0;  // the recorder thread's CPU over every recording phase's load
   fs::path on_dir, rec;
   std::vector<fs::path> on_dirs;
@@ -274,7 +281,7 @@ int Run(const Options& o) {
       p.recording = recording;
       p.tag = std::string(recording ? "on" : "off") + "_" + std::to_string(r + 1);
       p.dir = dir / p.tag;
-      auto server = StartServer(p.dir, recording ? (p.dir / "rec").string() : "");
+      auto server = StartServer(p.dir, recording ? (p.dir / "rec").string() : "", o.direct_io);
       if (!server.ok()) return server.status();
       p.server = *server;
       return p;
@@ -283,6 +290,7 @@ int Run(const Options& o) {
     auto finish = [&](Phase& p) -> bool {
       if (p.recording) {
         record_drops += std::max(0.0, Metric(p.server.metrics_port, "ave_record_drops_total"));
+        queue_at_end = std::max(queue_at_end, Metric(p.server.metrics_port, "ave_record_queue_items"));
         full_skips += std::max(0.0, Metric(p.server.metrics_port, "ave_record_disk_full_skips_total"));
         frames_in += std::max(0.0, Metric(p.server.metrics_port, "ave_frames_in_total"));
         on_dir = p.dir;
@@ -374,7 +382,7 @@ int Run(const Options& o) {
     }
   }
   // Replay start-up through a server: the Replay call until its first update arrives.
-  auto again = StartServer(on_dir, rec.string());
+  auto again = StartServer(on_dir, rec.string(), o.direct_io);
   if (!again.ok()) return std::cerr << "ave-bench record: " << again.status().message() << "\n", 1;
   // A replay's first update carries every camera's image at the seek point: with many cameras it
   // passes gRPC's default 4 MB receive limit, so allow what the server may send (16 MB).
@@ -416,7 +424,8 @@ int Run(const Options& o) {
   for (double v : overheads) std::cout << " " << v << " %";
   std::cout << "; median " << overhead_pct << " % server CPU; " << mb_per_s << " MB/s written over " << recorded_s
             << " s (last round); load average " << LoadAverage() << "\n"
-            << "recorder thread: " << recorder_cpu_pct << " % of a core while recording\n"
+            << "recorder thread: " << recorder_cpu_pct << " % of a core while recording; recorder queue at the load's end: "
+            << queue_at_end << " items at most (left out of the on phase's CPU)\n"
             << "seek (" << seek_ms.size() << " random times, all cameras): p50 " << Percentile(seek_ms, 0.5) << " ms, p99 "
             << Percentile(seek_ms, 0.99) << " ms; without the warm-up p50 " << Percentile(probe_ms, 0.5) << " ms, p99 "
             << Percentile(probe_ms, 0.99) << " ms; replay start-up (Replay call to first update) p50 "
@@ -426,15 +435,15 @@ int Run(const Options& o) {
   Plot(o.plot, {{"CPU off", median_off}, {"CPU on", median_on}, {"MB/s", mb_per_s}}, seek_ms);
   char json[900];
   std::snprintf(json, sizeof json,
-                "{\"streams\":%d,\"fps\":%.1f,\"seconds\":%.1f,\"rounds\":%d,\"concurrent\":%d,\"record_drops\":%.0f,\"cpu_off_pct\":%.1f,"
+                "{\"streams\":%d,\"fps\":%.1f,\"seconds\":%.1f,\"rounds\":%d,\"concurrent\":%d,\"direct_io\":%d,\"record_drops\":%.0f,\"cpu_off_pct\":%.1f,"
                 "\"cpu_on_pct\":%.1f,\"cpu_overhead_pct\":%.1f,\"cpu_overhead_min_pct\":%.1f,\"cpu_overhead_max_pct\":%.1f,"
                 "\"mb_per_s\":%.2f,\"seek_p50_ms\":%.2f,"
                 "\"seek_p99_ms\":%.2f,\"seek_no_warmup_p99_ms\":%.2f,\"replay_startup_ms\":%.2f,\"index_bytes_per_hour\":%.0f,"
-                "\"frames_indexed\":%lld,\"recorder_cpu_pct\":%.2f,\"loadavg_1m\":%.2f}",
-                o.streams, o.fps, o.seconds, o.rounds, o.concurrent ? 1 : 0, drops, median_off, median_on, overhead_pct,
+                "\"frames_indexed\":%lld,\"recorder_cpu_pct\":%.2f,\"record_queue_at_end\":%.0f,\"loadavg_1m\":%.2f}",
+                o.streams, o.fps, o.seconds, o.rounds, o.concurrent ? 1 : 0, o.direct_io ? 1 : 0, drops, median_off, median_on, overhead_pct,
                 *std::min_element(overheads.begin(), overheads.end()), *std::max_element(overheads.begin(), overheads.end()),
                 mb_per_s, Percentile(seek_ms, 0.5), Percentile(seek_ms, 0.99), Percentile(probe_ms, 0.99),
-                Percentile(startup_ms, 0.5), index_bytes_per_hour, static_cast<long long>(frames_all), recorder_cpu_pct, LoadAverage());
+                Percentile(startup_ms, 0.5), index_bytes_per_hour, static_cast<long long>(frames_all), recorder_cpu_pct, queue_at_end, LoadAverage());
   std::cout << json << std::endl;
   if (o.dir.empty()) fs::remove_all(dir);
   return 0;
@@ -450,6 +459,7 @@ Runner AddRecordBench(CLI::App& sub) {
   sub.add_flag("--concurrent", o->concurrent,
                "run each round's off and on servers at once, each under its own ave-loadgen (the same moment's "
                "machine load on both; twice the load on the machine)");
+  sub.add_flag("--direct-io", o->direct_io, "the recording servers write with O_DIRECT (ave-server --record-direct-io)");
   sub.add_option("--rounds", o->rounds, "rounds of an off and an on phase, in alternating order")
       ->check(CLI::Range(1, 100))
       ->capture_default_str();
