@@ -263,6 +263,27 @@ TEST(CameraEffects, LensDistortionBendsTheImageButNotTheCentre) {
   for (uint32_t id : d.object_id) ASSERT_TRUE(id <= kOccluderId || IsBuildingId(id) || IsMoverId(id));
 }
 
+// Issue 19 (the pose's NEES, by cause): the moving camera's frame at time t is rendered from
+// exactly scene::CameraPoseAt(t), the truth ave-bench pose scores against, and not from a
+// neighbouring frame's pose.
+TEST(CameraPipeline, MovingCameraFramesAreRenderedAtCameraPoseAtTheirTime) {
+  const Scenario campus = Load("campus");
+  scene::CameraSpec ideal = *campus.world.FindCamera("backpack");
+  ideal.intrinsics.distortion = {};
+  const SimulatedCamera cam(campus.world, ideal, {}, 1);
+  const CampusRenderer plain(campus.world);
+  for (int f : {0, 45, 150}) {
+    const double t = f / 30.0;
+    EXPECT_EQ(cam.PoseAt(t).translation, scene::CameraPoseAt(campus.world, ideal, t).translation);
+    const SimImage frame = cam.Frame(f, t);
+    const SimImage at_truth = plain.Render(ideal.intrinsics, scene::CameraPoseAt(campus.world, ideal, t), t);
+    const SimImage next = plain.Render(ideal.intrinsics, scene::CameraPoseAt(campus.world, ideal, t + 1 / 30.0), t);
+    ASSERT_GT(frame.width, 0);
+    EXPECT_EQ(frame.bgr, at_truth.bgr) << "frame " << f;
+    EXPECT_NE(frame.bgr, next.bgr) << "frame " << f;  // one frame's walk changes the image
+  }
+}
+
 // Example frames with every campus effect, for people to look at (AVE_SIM_PNG_DIR).
 TEST(CameraPipeline, WritesExampleFrames) {
   const char* env = std::getenv("AVE_SIM_PNG_DIR");
