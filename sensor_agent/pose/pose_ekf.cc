@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
 
 #include "sensor_agent/pose/so3.h"
 
@@ -169,6 +170,13 @@ void PoseEkf::InflatePose(double position_sigma_m, double orientation_sigma_rad)
     P_(kPos + i, kPos + i) += position_sigma_m * position_sigma_m;
     P_(kRot + i, kRot + i) += orientation_sigma_rad * orientation_sigma_rad;
   }
+}
+
+void PoseEkf::SetConsideredOrientation(const Eigen::Matrix3d& covariance) {
+  if (!covariance.allFinite() || !covariance.isApprox(covariance.transpose(), 1e-9)) return;
+  const Eigen::Matrix3d c = 0.5 * (covariance + covariance.transpose());
+  if (Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(c, Eigen::EigenvaluesOnly).eigenvalues().minCoeff() < 0) return;
+  considered_rot_ = c;
 }
 
 int PoseEkf::LandmarkIndex(int64_t id) const {
@@ -407,7 +415,7 @@ Matrix6d PoseEkf::PoseCovariance() const {
   c.topLeftCorner<3, 3>() = P_.block<3, 3>(kPos, kPos);
   c.topRightCorner<3, 3>() = P_.block<3, 3>(kPos, kRot);
   c.bottomLeftCorner<3, 3>() = P_.block<3, 3>(kRot, kPos);
-  c.bottomRightCorner<3, 3>() = P_.block<3, 3>(kRot, kRot);
+  c.bottomRightCorner<3, 3>() = P_.block<3, 3>(kRot, kRot) + considered_rot_;
   return c;
 }
 

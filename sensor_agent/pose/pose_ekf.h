@@ -126,6 +126,14 @@ class PoseEkf {
   // it back instead of being gated. Negative or non-finite sigmas are ignored.
   void InflatePose(double position_sigma_m, double orientation_sigma_rad);
 
+  // Consider covariance of the orientation (world rotation vector, rad²; issue 19, docs/POSE.md
+  // "NEES by cause"): an error every measurement of the pose shares and that no update can remove,
+  // i.e. the known features' persisting detection bias. It is added to the *reported*
+  // PoseCovariance() only: the filter's own covariance, gains and gates are unchanged, so is the
+  // estimate (a Schmidt "consider" term for a bias the state cannot observe). The caller (vision)
+  // sets it per frame; zero by default. Ignored unless finite, symmetric, positive semi-definite.
+  void SetConsideredOrientation(const Eigen::Matrix3d& covariance);
+
   // Estimated 3D points in the state (issue 19: "new features done right"): a point joins with its
   // own estimate and covariance, and from then on every update keeps its cross-covariances with
   // the pose, so its observations correct pose and point jointly (SLAM-style EKF; docs/POSE.md).
@@ -194,6 +202,7 @@ class PoseEkf {
   std::vector<int64_t> landmark_ids_;
   Eigen::VectorXd landmarks_;
   Eigen::MatrixXd cross_, landmark_cov_;
+  Eigen::Matrix3d considered_rot_ = Eigen::Matrix3d::Zero();  // SetConsideredOrientation
 };
 
 }  // namespace ave::pose

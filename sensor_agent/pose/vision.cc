@@ -704,6 +704,15 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
     for (Track& t : m.tracks) t.key_px = t.px, t.has_key = true;
   }
   m.previous_pyramid = std::move(pyramid);
+  if (m.options.feature_bias_px > 0 && stats.points_used + stats.lines_used > 0) {
+    double r2 = 0;
+    for (const auto& pm : stats.point_matches) r2 += (pm.second - Eigen::Vector2d(m.k.cx, m.k.cy)).squaredNorm();
+    const double radius = stats.point_matches.empty() ? 0.25 * m.k.width : std::max(20.0, std::sqrt(r2 / stats.point_matches.size()));
+    const double b = m.options.feature_bias_px;
+    const Eigen::Vector3d sigma(b / m.k.fx, b / m.k.fy, b / radius);
+    const Eigen::Matrix3d R = ekf.world_from_camera().rotation.toRotationMatrix();
+    ekf.SetConsideredOrientation(R * sigma.cwiseAbs2().asDiagonal() * R.transpose());
+  }
   for (int s = 0; s < kVisionStageCount; ++s) (s == kStageEkf || s == kStageUnknown ? stats.update_ms : stats.detect_ms) += stats.stage_ms[s];
   return stats;
 }

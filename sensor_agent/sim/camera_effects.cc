@@ -196,6 +196,7 @@ struct SimulatedCamera::Impl {
   PinholeIntrinsics render_intrinsics;
   cv::Mat map_x, map_y;
   std::vector<int64_t> nearest;
+  std::vector<uint8_t> read;  // per ideal pixel: 1 where the resampling reads it (shade_only_read_pixels)
   mutable std::vector<StageTime> timings;
 };
 
@@ -263,6 +264,28 @@ SimulatedCamera::SimulatedCamera(const scene::SyntheticCampus& campus, const sce
                               ? static_cast<int64_t>(v) * r.width + u
                               : -1;
     }
+    if (renderer_options.shade_only_read_pixels) {
+      // cv::remap (INTER_LINEAR) reads the 2x2 neighbours of each map point after rounding it to
+      // 1/32 px: mark floor(x - 1/32) .. floor(x + 1/32) + 1 (and rows alike), clamped as
+      // BORDER_REPLICATE clamps; plus the nearest pixel for ids, classes and depths.
+      impl_->read.assign(static_cast<size_t>(r.width) * r.height, 0);
+      bool all_finite = true;
+      for (size_t i = 0; i < ideal.size() && all_finite; ++i) {
+        const double x = impl_->map_x.at<float>(static_cast<int>(i)), y = impl_->map_y.at<float>(static_cast<int>(i));
+        if (!std::isfinite(x) || !std::isfinite(y)) {
+          all_finite = false;
+          break;
+        }
+        const int u0 = std::clamp(static_cast<int>(std::floor(x - 1.0 / 32)), 0, r.width - 1);
+        const int u1 = std::clamp(static_cast<int>(std::floor(x + 1.0 / 32)) + 1, 0, r.width - 1);
+        const int v0 = std::clamp(static_cast<int>(std::floor(y - 1.0 / 32)), 0, r.height - 1);
+        const int v1 = std::clamp(static_cast<int>(std::floor(y + 1.0 / 32)) + 1, 0, r.height - 1);
+        for (int v = v0; v <= v1; ++v)
+          for (int u = u0; u <= u1; ++u) impl_->read[static_cast<size_t>(v) * r.width + u] = 1;
+        if (impl_->nearest[i] >= 0) impl_->read[impl_->nearest[i]] = 1;
+      }
+      if (!all_finite) impl_->read.clear();  // shade everything
+    }
   }
 }
 
@@ -284,7 +307,7 @@ SimImage SimulatedCamera::Frame(int64_t frame_index, double t_s) const {
     clock = now;
   };
   CampusRenderer::Stats stats;
-  SimImage image = m.renderer->Render(m.render_intrinsics, PoseAt(t_s), t_s, &stats);
+  SimImage image = m.renderer->Render(m.render_intrinsics, PoseAt(t_s), t_s, &stats, m.read.empty() ? nullptr : &m.read);
   lap("render");
   if (m.effects.Has(EffectKind::kWavingVegetation)) {
     // Renderer side: reported apart from the render it happened inside.

@@ -209,7 +209,7 @@ GpsImuStreams SimulateGpsImu(const scene::SyntheticCampus& campus, const scene::
   }
 
   // IMU: rates and specific force by finite differences of the analytic trajectory. The gyro
-  // sample k is the mean body rate over [t_k - dt/2, t_k + dt/2] (so integrating the samples
+  // sample k is the mean body rate over [t_k - dt/2, t_k + dt/2] (sample 0: [0, dt/2]; so integrating the samples
   // reproduces the true orientation change exactly); the accelerometer the second difference of
   // position over ±dt, plus gravity, in the body frame.
   {
@@ -227,9 +227,16 @@ GpsImuStreams SimulateGpsImu(const scene::SyntheticCampus& campus, const scene::
       s.t_ns = ToNs(t);
       s.true_orientation = now.rotation;
       s.orientation = now.rotation;
-      const Eigen::Quaterniond before = pose(t - 0.5 * dt).rotation, after = pose(t + 0.5 * dt).rotation;
-      s.gyro_rad_s = LogSO3(before.conjugate() * after) / dt;
-      const Eigen::Vector3d accel_world = (pose(t + dt).translation - 2 * now.translation + pose(t - dt).translation) / (dt * dt);
+      // The run starts at t = 0: the first sample's window is [0, dt/2] and its acceleration the
+      // forward difference. CameraPoseAt's ping-pong path turns round at t = 0, so a window
+      // reaching back before it read the 180-degree turn (~470 rad/s: integrated from t = 0, the
+      // gyro was then 1.57 rad off about the camera's y axis; issue 19).
+      const double t_before = std::max(0.0, t - 0.5 * dt);
+      const Eigen::Quaterniond before = pose(t_before).rotation, after = pose(t + 0.5 * dt).rotation;
+      s.gyro_rad_s = LogSO3(before.conjugate() * after) / (t + 0.5 * dt - t_before);
+      const Eigen::Vector3d accel_world =
+          k == 0 ? Eigen::Vector3d((pose(t + 2 * dt).translation - 2 * pose(t + dt).translation + now.translation) / (dt * dt))
+                 : Eigen::Vector3d((pose(t + dt).translation - 2 * now.translation + pose(t - dt).translation) / (dt * dt));
       s.accel_m_s2 = now.rotation.conjugate() * (accel_world + Eigen::Vector3d(0, 0, kGravity_m_s2));
       s.magnetic = now.rotation.conjugate() * kEarthField_uT;
       if (drift) GyroDrift(*drift, seed, k, dt, bias, error, s);

@@ -60,6 +60,28 @@ TEST(GpsImu, AccelerometerReadsGravityWhileWalkingStraight) {
   }
 }
 
+// Issue 19: the first sample's window used to reach back before t = 0, where the ping-pong path
+// turns round, and read a 180-degree turn (~470 rad/s): integrated from t = 0 the gyro was 1.57 rad
+// off. The run starts at t = 0; from sample 0 on, the integrated gyro is the truth's rotation.
+TEST(GpsImu, GyroFromTheFirstSampleIntegratesToTheTruth) {
+  const scene::SyntheticCampus site = testing::CourtyardSite();
+  const GpsImuStreams s = SimulateGpsImu(site, Backpack(site), Spec(5), EffectSet{}, 1);
+  const double dt = 1.0 / 150;
+  ASSERT_FALSE(s.imu.empty());
+  EXPECT_LT(s.imu[0].gyro_rad_s.norm(), 1e-9);  // the walk starts on a straight leg
+  EXPECT_NEAR((s.imu[0].true_orientation * s.imu[0].accel_m_s2).z(), kGravity_m_s2, 0.05);
+  Eigen::Quaterniond integrated = Eigen::Quaterniond::Identity();
+  for (size_t k = 0; k < s.imu.size(); ++k) {
+    const double window = k == 0 ? 0.5 * dt : dt;
+    const Eigen::Vector3d w = s.imu[k].gyro_rad_s * window;
+    const double angle = w.norm();
+    if (angle > 0) integrated = integrated * Eigen::Quaterniond(Eigen::AngleAxisd(angle, w / angle));
+  }
+  const Eigen::Quaterniond start = scene::CameraPoseAt(site, Backpack(site), 0).rotation;
+  const Eigen::Quaterniond end = scene::CameraPoseAt(site, Backpack(site), (s.imu.size() - 0.5) * dt).rotation;
+  EXPECT_LT(AngleBetween(integrated, start.conjugate() * end), 1e-9);
+}
+
 TEST(GpsImu, GyroIntegratesToTheTrueOrientationChangeThroughTurns) {
   const scene::SyntheticCampus site = testing::CourtyardSite();
   // 60 s: two corners and the ping-pong reversal at the path's end (a 180° turn within a sample).

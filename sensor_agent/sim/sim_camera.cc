@@ -28,7 +28,30 @@ struct Surface {
   int32_t building = -1;                  // index into the campus's buildings, or -1
   Vector3f normal = Vector3f::UnitZ();    // unit, local frame, outward
   Vector3f color = Vector3f::Zero();      // movers, trees, static objects: rgb in [0, 1]
+  // Ground triangles: false when every point of the triangle (with a 0.5 m margin) lies farther
+  // than each road's half width from it, i.e. RoadAt is empty there (issue 19: the road search
+  // was 5 % of a moving camera's render).
+  bool may_be_road = true;
 };
+
+// Distance from p to the segment a-b (2D).
+double SegmentDistance(const Vector2d& p, const Vector2d& a, const Vector2d& b) {
+  const Vector2d ab = b - a;
+  const double len2 = ab.squaredNorm();
+  const double t = len2 > 0 ? std::clamp((p - a).dot(ab) / len2, 0.0, 1.0) : 0.0;
+  return (a + t * ab - p).norm();
+}
+
+// Whether any point within `radius` of `centre` may lie on a road of the campus (conservative).
+bool MayBeRoad(const scene::SyntheticCampus& campus, const Vector2d& centre, double radius) {
+  for (const scene::Road& road : campus.roads) {
+    for (size_t i = 0; i + 1 < road.points_m.size(); ++i) {
+      if (SegmentDistance(centre, road.points_m[i], road.points_m[i + 1]) <= road.half_width_m + radius) return true;
+    }
+    if (road.points_m.size() == 1 && (road.points_m[0] - centre).norm() <= road.half_width_m + radius) return true;
+  }
+  return false;
+}
 
 // One building part's own frame, for window grids and roof edges.
 struct PartLook {
@@ -134,7 +157,10 @@ Vector3f Grass(const Vector2d& p, double footprint_m) {
   return Mix(c, Vector3f(0.56f, 0.55f, 0.30f), 0.45f * dry);
 }
 
-Vector3f Ground(const scene::SyntheticCampus& campus, const Vector2d& p, double footprint_m) {
+// `may_be_road` false: the caller knows p lies farther than any road's half width from every road
+// (Surface::may_be_road), where RoadAt would find nothing; the same result without its search.
+Vector3f Ground(const scene::SyntheticCampus& campus, const Vector2d& p, double footprint_m, bool may_be_road = true) {
+  if (!may_be_road) return Grass(p, footprint_m);
   const std::optional<scene::RoadPoint> road = campus.RoadAt(p.x(), p.y());
   if (!road) return Grass(p, footprint_m);
   const float g = 0.30f + 0.08f * (Octave(p, 0.6, 21, footprint_m) - 0.5f) + 0.08f * (Octave(p, 5.0, 22, footprint_m) - 0.5f);
@@ -301,7 +327,27 @@ class Rasterizer {
     for (int y = y0; y <= y1; ++y) {
       float* depth_row = depth_ + static_cast<size_t>(y) * k_.width;
       uint32_t* triangle_row = triangle_ + static_cast<size_t>(y) * k_.width;
-      for (int x = x0; x <= x1; ++x) {
+      // Each edge function is affine in x along the row: the x where all three are >= 0 lie in
+      // [lo, hi]. Only that span (one pixel of margin for rounding) is tested, with the exact
+      // test below deciding: the same pixels as testing the whole box (issue 19: most of a
+      // slanted triangle's box is outside it).
+      double lo = x0, hi = x1;
+      for (const Edge* e : {&e_a, &e_b, &e_c}) {
+        const double slope = -orient * e->sign * e->dv;  // d(w)/dx
+        const double at0 = orient * (*e)(0.0, y);        // w at x = 0
+        if (slope > 0) {
+          lo = std::max(lo, -at0 / slope);
+        } else if (slope < 0) {
+          hi = std::min(hi, -at0 / slope);
+        }
+      }
+      int xs = x0, xe = x1;
+      if (std::isfinite(lo) && std::isfinite(hi)) {
+        if (lo > hi + 2) continue;
+        xs = std::max(x0, static_cast<int>(std::floor(std::max(lo, -1e9))) - 1);
+        xe = std::min(x1, static_cast<int>(std::ceil(std::min(hi, 1e9))) + 1);
+      }
+      for (int x = xs; x <= xe; ++x) {
         const double wa = orient * e_a(x, y), wb = orient * e_b(x, y), wc = orient * e_c(x, y);
         if (wa < 0 || wb < 0 || wc < 0) continue;
         const double sum = wa + wb + wc;
@@ -458,6 +504,12 @@ CampusRenderer::CampusRenderer(const scene::SyntheticCampus& campus, Options opt
       case SurfaceMaterial::kObject: s.cls = PixelClass::kStaticObject; s.object_id = kStaticObjectId; break;
     }
     if (s.building >= 0) s.object_id = kBuildingIdBase + static_cast<uint32_t>(s.building);
+    if (s.material == SurfaceMaterial::kTerrain || s.material == SurfaceMaterial::kRoad) {
+      const Vector2d a = p0.head<2>().cast<double>(), b = p1.head<2>().cast<double>(), c = p2.head<2>().cast<double>();
+      const Vector2d centre = (a + b + c) / 3;
+      const double radius = std::max({(a - centre).norm(), (b - centre).norm(), (c - centre).norm()}) + 0.5;
+      s.may_be_road = MayBeRoad(campus, centre, radius);
+    }
   }
 
   const std::array<Vector3f, 5> wall_palette = {Vector3f(0.80f, 0.74f, 0.62f), Vector3f(0.74f, 0.74f, 0.72f),
@@ -492,7 +544,8 @@ CampusRenderer::~CampusRenderer() = default;
 
 const CampusRenderer::Options& CampusRenderer::options() const { return impl_->options; }
 
-SimImage CampusRenderer::Render(const PinholeIntrinsics& k, const Rigid3d& world_from_camera, double t_s, Stats* stats) const {
+SimImage CampusRenderer::Render(const PinholeIntrinsics& k, const Rigid3d& world_from_camera, double t_s, Stats* stats,
+                                const std::vector<uint8_t>* shade_only) const {
   SimImage image;
   if (!k.Check().empty() || !world_from_camera.translation.allFinite() || !world_from_camera.rotation.coeffs().allFinite()) {
     return image;
@@ -586,10 +639,12 @@ SimImage CampusRenderer::Render(const PinholeIntrinsics& k, const Rigid3d& world
   // perspective-correct local-frame position; textures are functions of that position. A pixel
   // that still shows the layer's fixed scene (or sky) takes the layer's shading once known.
   const Vector3f sun = m.sun;
+  if (shade_only && shade_only->size() != pixels) shade_only = nullptr;
   for (int y = 0; y < h; ++y) {
     const double yn = (y - k.cy) / k.fy;
     for (int x = 0; x < w; ++x) {
       const size_t i = static_cast<size_t>(y) * w + x;
+      if (shade_only && !(*shade_only)[i]) continue;
       const uint32_t tri = triangle[i];
       const bool fixed_pixel = layer && layer->triangle[i] == tri;
       if (fixed_pixel && layer->shaded[i]) {
@@ -613,7 +668,7 @@ SimImage CampusRenderer::Render(const PinholeIntrinsics& k, const Rigid3d& world
         const double footprint_m = distance / k.fx / std::max(cos_view, 0.1);
         switch (s.material) {
           case SurfaceMaterial::kTerrain:
-          case SurfaceMaterial::kRoad: rgb = Ground(m.campus, p.head<2>(), footprint_m); break;
+          case SurfaceMaterial::kRoad: rgb = Ground(m.campus, p.head<2>(), footprint_m, s.may_be_road); break;
           case SurfaceMaterial::kWall: rgb = Wall(m.buildings[s.building], s.building, p, s.normal, footprint_m); break;
           case SurfaceMaterial::kRoof: rgb = Roof(m.buildings[s.building], s.building, p, footprint_m); break;
           case SurfaceMaterial::kObject: rgb = s.color; break;

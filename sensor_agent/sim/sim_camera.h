@@ -90,6 +90,11 @@ struct RendererOptions {
   // the movers and the pixels they cover or uncover. Bit-identical to rendering everything (the
   // fixed triangles come first in the draw order and their shading does not depend on time).
   bool reuse_static_layer = true;
+  // A SimulatedCamera with lens distortion renders a padded ideal image and resamples it; with this
+  // set it shades only the ideal pixels that resampling reads (the bilinear neighbours and the
+  // nearest pixel of each output pixel; 95 % of the padded image for the backpack lens), the
+  // rest stay black sky. Bit-identical output (issue 19, the backpack camera's rate).
+  bool shade_only_read_pixels = true;
 
   // Empty when usable; otherwise names the first bad field.
   std::string Check() const;
@@ -112,12 +117,14 @@ class CampusRenderer {
   // `world_from_camera` (local frame). Invalid intrinsics (PinholeIntrinsics::Check) or a
   // non-finite pose give an empty image (width = height = 0). Pure: the same inputs give
   // bit-identical output.
-  // `stats`, when given, receives the time spent in renderer-side effects.
+  // `stats`, when given, receives the time spent in renderer-side effects. `shade_only`, when given
+  // (one byte per pixel), restricts shading to the pixels where it is non-zero: the others keep
+  // their depth but stay black with the sky's id and class (for a caller that never reads them).
   struct Stats {
     double waving_vegetation_s = 0;  // swaying the crowns (0 when the effect is off)
   };
   SimImage Render(const PinholeIntrinsics& intrinsics, const Rigid3d& world_from_camera, double t_s,
-                  Stats* stats = nullptr) const;
+                  Stats* stats = nullptr, const std::vector<uint8_t>* shade_only = nullptr) const;
 
   const Options& options() const;
 

@@ -59,6 +59,7 @@ struct PoseBenchOptions {
   bool gyro_bias = pose::PoseFilterOptions{}.estimate_gyro_bias;  // issue 19: the bias in the state
   double acquisition_sigma_m = pose::VisionOptions{}.acquisition_position_sigma_m;  // issue 19
   double acquisition_sigma_deg = pose::VisionOptions{}.acquisition_orientation_sigma_deg;
+  double feature_bias_px = pose::VisionOptions{}.feature_bias_px;
   double gyro_bias_sigma_rad_s = pose::PoseFilterOptions{}.gyro_bias_sigma_rad_s;
   bool knobs = true;     // the front end's knobs at 50 features
   bool variants = true;  // the bus and bump scenario variants (need --seconds >= 7.2)
@@ -96,6 +97,9 @@ struct Row {
   int frames = 0;
   int matches = 0, matches_within_2px = 0;  // known-point matches and those within 2 px of the true projection
   std::vector<double> match_error_key_px, match_error_tracked_px;  // their distance from the truth, keyframes / tracked frames
+  // Signed match residuals (observed - true projection, px; |r| <= 3 px) summed per kind: [keyframe/tracked][foot/eaves]
+  // (issue 19: are the vision measurements biased?).
+  std::array<std::array<std::array<double, 3>, 2>, 2> residual_sum{};  // (sum u, sum v, count)
   std::array<double, pose::kVisionStageCount> stage_ms{};
   int keyframes = 0, weak_locks = 0, relocks = 0;
   int64_t rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0, klt_lost = 0, unknown_dropped = 0;
@@ -394,6 +398,7 @@ int RunPose(const PoseBenchOptions& o) {
     vo.acquiring_sigma_px = o.acquiring_sigma_px;
     vo.acquisition_position_sigma_m = o.acquisition_sigma_m;
     vo.acquisition_orientation_sigma_deg = o.acquisition_sigma_deg;
+    vo.feature_bias_px = o.feature_bias_px;
     vo.use_lines = o.lines;
     vo.use_new_points = o.new_points;
     if (run.tweak) run.tweak(vo);
@@ -450,6 +455,11 @@ int RunPose(const PoseBenchOptions& o) {
           ++row.matches;
           row.matches_within_2px += true_uv && (*true_uv - uv).norm() <= 2.0;
           if (true_uv) (s.keyframe ? row.match_error_key_px : row.match_error_tracked_px).push_back((*true_uv - uv).norm());
+          if (true_uv && (uv - *true_uv).norm() <= 3.0) {
+            const bool eaves = p.z() > frame_truth.translation.z();
+            std::array<double, 3>& sum = row.residual_sum[s.keyframe ? 0 : 1][eaves ? 1 : 0];
+            sum[0] += (uv - *true_uv).x(), sum[1] += (uv - *true_uv).y(), sum[2] += 1;
+          }
         }
         if (peer) {  // the peers: per-frame PnP on the same known-point matches
           for (int method = 0; method < 2; ++method) {
@@ -621,6 +631,19 @@ int RunPose(const PoseBenchOptions& o) {
                 100 * r.nees_below / f, 100 * r.nees_above / f, r.nees_sum / f, SpreadOf(r.nees).median, mk.median, mk.p95, mt.median, mt.p95, r.landmarks_in_state / std::max(1, r.frames), r.landmarks_joined,
                 r.landmark_error_m.size(), le.median, le.p95, lm_nees, r.landmark_nees.empty() ? 0.0 : 100.0 * lm_in / r.landmark_nees.size());
   }
+  std::printf("\nknown-point match residuals (observed - true projection, px, matches within 3 px): mean u, mean v (count)\n"
+              "| mode | keyframes, wall feet | keyframes, eaves | tracked, wall feet | tracked, eaves |\n| --- | ---: | ---: | ---: | ---: |\n");
+  for (const Row& r : rows) {
+    if (r.features == 0 || r.mode != "gps-imu-vision") continue;
+    std::printf("| %s |", RowName(r).c_str());
+    for (int a = 0; a < 2; ++a)
+      for (int b = 0; b < 2; ++b) {
+        const std::array<double, 3>& q = r.residual_sum[a][b];
+        const double c = std::max(1.0, q[2]);
+        std::printf(" %+.3f, %+.3f (%.0f) |", q[0] / c, q[1] / c, q[2]);
+      }
+    std::printf("\n");
+  }
   std::printf("\nscenario variants, misregistration median px (p95) in the windows around the event:\n| variant | 1 s before | during | 1 s after |\n| --- | ---: | ---: | ---: |\n");
   for (const Row& r : rows) {
     if (!r.event) continue;
@@ -686,6 +709,9 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--acquisition-sigma-m", o->acquisition_sigma_m, "position sigma added before the first vision frame (issue 19; 0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 100.0));
+  sub.add_option("--feature-bias-px", o->feature_bias_px,
+                 "persisting detection bias of known features, px: floors the orientation covariance (issue 19; 0: off)")
+      ->check(CLI::Range(0.0, 10.0));
   sub.add_option("--acquisition-sigma-deg", o->acquisition_sigma_deg, "orientation sigma added before the first vision frame (issue 19; 0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 90.0));
