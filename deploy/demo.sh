@@ -146,19 +146,25 @@ if [ "$lidar_demo" = 1 ]; then
 fi
 
 metrics_port=$(sed -n 's/^metrics on port \([0-9]*\)$/\1/p' "$out/server.out" | head -1)
-if [ "$lidar_demo" = 1 ] && [ -n "$metrics_port" ]; then
-  # The LiDAR agent first builds its simulated sensor: wait (up to a minute) until the server has
-  # taken its first sweep, so the viewer's first picture has the LiDAR's people in it.
-  python3 - "http://127.0.0.1:$metrics_port/metrics" <<'PY' || echo "demo: the LiDAR has sent no sweep yet; going on"
+if [ -n "$metrics_port" ]; then
+  # The LiDAR agent first builds its simulated sensor and the backpack's agent first simulates its
+  # GPS and inertial history: wait (up to a minute) until the server has every sensor's stream open
+  # and, with the LiDAR, its first sweep, so the viewer's first picture has them all in it.
+  sensors=$((3 + backpack_demo + lidar_demo))
+  python3 - "http://127.0.0.1:$metrics_port/metrics" "$sensors" "$lidar_demo" <<'PY' ||
 import re, sys, time, urllib.request
+want_sensors, want_sweep = int(sys.argv[2]), sys.argv[3] == "1"
+def metric(text, name):
+    m = re.search(r"^" + name + r" (\d+)$", text, re.M)
+    return int(m.group(1)) if m else 0
 for _ in range(600):
     text = urllib.request.urlopen(sys.argv[1], timeout=5).read().decode()
-    m = re.search(r"^ave_lidar_sweeps_in_total (\d+)$", text, re.M)
-    if m and int(m.group(1)) > 0:
+    if metric(text, "ave_sensors_connected") >= want_sensors and (not want_sweep or metric(text, "ave_lidar_sweeps_in_total") > 0):
         sys.exit(0)
     time.sleep(0.1)
 sys.exit(1)
 PY
+    echo "demo: not every sensor is streaming yet (or the LiDAR has sent no sweep); going on"
 fi
 
 if [ -n "${DISPLAY:-}" ] && [ "${AVE_DEMO_HEADLESS:-0}" != 1 ]; then
