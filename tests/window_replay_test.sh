@@ -54,6 +54,17 @@ snapshot() {
   cp "$out/window/quad.png" "$out/$1.png"
   grep 'viewer: replay time line at' "$log" | tail -1 >"$out/$1.layout"
 }
+# click_button NAME: a left click in the middle of the panel's "NAME" button, where the viewer's
+# last layout line says it is.
+click_button() {
+  local layout x y w h
+  layout=$(grep 'viewer: replay time line at' "$log" | tail -1)
+  read -r x y w h < <(echo "$layout" | sed -n "s/.*$1 button at x \\([0-9-]*\\) y \\([0-9-]*\\) w \\([0-9]*\\) h \\([0-9]*\\) px.*/\\1 \\2 \\3 \\4/p")
+  [ -n "${h:-}" ] || give_up "unreadable layout line for '$1': $layout"
+  xdotool mousemove --window "$win" $((x + w / 2)) $((y + h / 2))
+  sleep 0.3
+  xdotool click 1
+}
 focus_viewer_window
 trap 'give_up "an xdotool step failed"' ERR
 
@@ -89,20 +100,10 @@ xdotool mouseup 1
 wait_for 'viewer: (replay from .*\(time line\)|live \()' 300 >/dev/null || give_up "the drag on the time line did nothing"
 wait_for 'viewer: replaying recorded time' 300 >/dev/null || give_up "the replay showed no recorded moment"
 # Pause where the replay is, so the snapshot shows a moment near the seek however late 'p' lands.
-layout=$(grep 'viewer: replay time line at' "$log" | tail -1)
-read -r px py pw ph < <(echo "$layout" | sed -n 's/.*pause button at x \([0-9-]*\) y \([0-9-]*\) w \([0-9]*\) h \([0-9]*\) px.*/\1 \2 \3 \4/p')
-[ -n "${ph:-}" ] || give_up "unreadable layout line: $layout"
-xdotool mousemove --window "$win" $((px + pw / 2)) $((py + ph / 2))
-sleep 0.3
-xdotool click 1
+click_button pause
 wait_for 'viewer: paused at recorded time' 300 >/dev/null || give_up "the click on 'pause' did nothing"
 snapshot replay
-layout=$(grep 'viewer: replay time line at' "$log" | tail -1)
-read -r lx ly lw lh < <(echo "$layout" | sed -n 's/.*live button at x \([0-9-]*\) y \([0-9-]*\) w \([0-9]*\) h \([0-9]*\) px.*/\1 \2 \3 \4/p')
-[ -n "${lh:-}" ] || give_up "unreadable layout line: $layout"
-xdotool mousemove --window "$win" $((lx + lw / 2)) $((ly + lh / 2))
-sleep 0.3
-xdotool click 1
+click_button live
 wait_for 'viewer: live \(' 300 >/dev/null || give_up "the click on 'live' did nothing"
 # Off the panel before the last picture: no hover highlight or tooltip over the time line.
 xdotool mousemove --window "$win" 900 700
