@@ -85,10 +85,11 @@ int main(int argc, char** argv) {
                  "recorder: syncfs (one sync of the recording's filesystem per period) or fdatasync (one per "
                  "segment; bounds the flush time on a disk shared with heavy writers)")
       ->capture_default_str()->check(CLI::IsMember({"syncfs", "fdatasync"}));
-  bool record_direct_io = false;
-  app.add_flag("--record-direct-io", record_direct_io,
-               "recorder: write segment batches with O_DIRECT from an aligned buffer (no page cache copy or "
-               "writeback of the JPEGs; replay reads recent frames from the disk)");
+  bool record_direct_io = true;
+  app.add_flag("--record-direct-io,!--record-buffered-io", record_direct_io,
+               "recorder: write segment batches with O_DIRECT from an aligned buffer (the default: no page cache "
+               "copy or writeback of the JPEGs; replay reads recent frames from the disk); --record-buffered-io "
+               "writes through the page cache instead");
   app.add_option("--log-level", log_level, "debug, info, warning or error")->check(CLI::IsMember({"debug", "info", "warning", "error"}));
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-server")) return *exit_code;
   ave::log::MinLevel() = log_level == "debug" ? ave::log::Level::kDEBUG

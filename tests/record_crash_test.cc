@@ -5,8 +5,9 @@
 // unindexed tails are cut (every segment file is exactly as long as its indexed bytes) and
 // recording goes on; the newest frame each agent's acks called recorded (SensorAck.recorded_sequence)
 // before a kill is in the index. AVE_RECORD_CRASH_KILLS gives the full form (10 kills).
-// The server runs in turn with the defaults (--record-sync syncfs, --record-sync-ms 500), with
-// fdatasync every 250 ms, and with the defaults plus --record-direct-io (O_DIRECT batches).
+// The server runs in turn with the defaults (O_DIRECT batches, --record-sync syncfs,
+// --record-sync-ms 500), with fdatasync every 250 ms, and with the defaults plus
+// --record-buffered-io (segment bytes through the page cache).
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <signal.h>
@@ -69,8 +70,9 @@ class RecordingServer {
   RecordingServer(fs::path dir, int port) : dir_(std::move(dir)), port_(port) {}
   ~RecordingServer() { Kill(SIGKILL); }
   // kPerFile: --record-sync fdatasync (one fdatasync per segment) every 250 ms instead of the
-  // defaults (syncfs every 500 ms); kDirect: the defaults plus --record-direct-io.
-  enum Mode { kDefaults, kPerFile, kDirect };
+  // defaults (syncfs every 500 ms, O_DIRECT batches); kBuffered: the defaults plus
+  // --record-buffered-io (segment bytes through the page cache).
+  enum Mode { kDefaults, kPerFile, kBuffered };
   void Start(Mode mode = kDefaults) {
     const bool per_file = mode == kPerFile;
     pid_ = ::fork();
@@ -87,7 +89,7 @@ class RecordingServer {
       std::vector<std::string> args = {bin, "--listen", listen, "--store", store, "--campus-grid", "8", "--record-dir", rec,
                                        "--record-sync", per_file ? "fdatasync" : "syncfs", "--record-sync-ms",
                                        per_file ? "250" : "500"};
-      if (mode == kDirect) args.push_back("--record-direct-io");
+      if (mode == kBuffered) args.push_back("--record-buffered-io");
       std::vector<char*> argv;
       for (std::string& a : args) argv.push_back(a.data());
       argv.push_back(nullptr);

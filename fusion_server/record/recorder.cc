@@ -440,9 +440,12 @@ Recorder::OpenSegment* Recorder::SegmentFor(const std::string& sensor_id, int64_
   if (options_.direct_io && direct_ok_) {
     seg.direct_fd = ::open((fs::path(options_.dir) / seg.row.path).c_str(), O_WRONLY | O_DIRECT | O_CLOEXEC);
     if (seg.direct_fd < 0) {
-      direct_ok_ = false;
-      AVE_LOG(WARNING) << "recording: O_DIRECT refused in '" << sensor_dir.string() << "' (" << std::strerror(errno)
-                       << "), writing through the page cache";
+      // EINVAL: the filesystem does not take O_DIRECT (every later segment would be refused too);
+      // anything else (out of descriptors, say) costs this segment its direct writes only.
+      const int err = errno;
+      if (err == EINVAL) direct_ok_ = false;
+      AVE_LOG(WARNING) << "recording: O_DIRECT refused for '" << seg.row.path << "' (" << std::strerror(err) << "), "
+                       << (err == EINVAL ? "writing through the page cache" : "this segment through the page cache");
     }
   }
   return &open_.emplace(sensor_id, std::move(seg)).first->second;
@@ -823,7 +826,7 @@ void Recorder::RenderPrometheus(std::string& out) const {
        s.disk_full_events);
   line("ave_record_write_errors_total", "counter", "Frames lost to other write, sync or index errors.", s.write_errors);
   line("ave_record_syncs_total", "counter", "syncfs or fdatasync calls that made segment bytes durable.", s.syncs);
-  line("ave_record_direct_writes_total", "counter", "O_DIRECT writes of segment batches (--record-direct-io).",
+  line("ave_record_direct_writes_total", "counter", "O_DIRECT writes of segment batches (the default; none with --record-buffered-io).",
        s.direct_writes);
   line("ave_record_segments_deleted_total", "counter", "Segments deleted by retention.", s.segments_deleted);
   line("ave_record_disk_full", "gauge", "1 while recording is stopped for a full disk or budget.", s.disk_full ? 1 : 0);

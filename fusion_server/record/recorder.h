@@ -64,14 +64,15 @@ struct RecorderOptions {
   // dirty on that filesystem: on a disk shared with heavy writers, kPerFile bounds the flush time.
   enum class SyncMethod { kFilesystem, kPerFile };
   SyncMethod sync_method = SyncMethod::kFilesystem;
-  // `ave-server --record-direct-io`: write each segment's batch with O_DIRECT from a page-aligned
-  // buffer (the batch's frames copied into it; the partial block at the segment's end rewritten
-  // with the next batch), past the page cache: no page-cache pages, buffer heads or delayed block
+  // ave-server's default (off with `--record-buffered-io`; this struct's default stays off): write
+  // each segment's batch with O_DIRECT from a page-aligned buffer (the batch's frames copied into
+  // it; the partial block at the segment's end rewritten with the next batch), past the page cache: no page-cache pages, buffer heads or delayed block
   // allocation per 4 KB in the writer, no dirty pages for the kernel's flusher to write back. The
   // sync and commit order is the same (the sync still writes the inode and flushes the device
   // cache). Replay then reads recent frames from the disk, not from memory. A filesystem that
-  // refuses O_DIRECT (or an aligned write) gets buffered writes, with one log line. Each open
-  // segment then holds a second descriptor (the O_DIRECT one).
+  // refuses O_DIRECT (EINVAL, or an aligned write refused) gets buffered writes, with one log line;
+  // another failed O_DIRECT open (out of descriptors) costs only that segment its direct writes.
+  // Each open segment then holds a second descriptor (the O_DIRECT one).
   bool direct_io = false;
   std::chrono::milliseconds objects_period{500};     // fused objects recorded at most this often
   // The fused objects now (a SceneUpdate holding only objects, server time in server_time_ns);

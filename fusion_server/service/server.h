@@ -60,7 +60,7 @@ struct ServerOptions {
   // received in the last period plus one flush; acknowledged frames are never lost.
   std::chrono::milliseconds record_sync_period{500};
   bool record_sync_per_file = false;  // --record-sync fdatasync: one fdatasync per segment, not one syncfs
-  bool record_direct_io = false;      // --record-direct-io: segment batches written with O_DIRECT
+  bool record_direct_io = true;       // segment batches written with O_DIRECT (--record-buffered-io: off)
 
   // Empty when usable, else names the bad field.
   std::string Check() const;

@@ -50,7 +50,7 @@ struct Options {
   int seeks = 100;
   int rounds = 3;
   bool concurrent = false;
-  bool direct_io = false;  // the recording servers get --record-direct-io
+  bool direct_io = true;  // the server's default; false: the recording servers get --record-buffered-io
   std::string plot = "record_bench.png";
   std::string dir;  // recording and stores; default a temporary directory
 };
@@ -81,7 +81,7 @@ absl::StatusOr<Server> StartServer(const fs::path& dir, const std::string& recor
     std::vector<std::string> args = {bin, "--listen", "127.0.0.1:0", "--store", store, "--campus-grid", "8",
                                      "--log-level", "warning", "--max-fps-hint", "30", "--metrics-listen", "127.0.0.1:0"};
     if (!record_dir.empty()) args.insert(args.end(), {"--record-dir", record_dir});
-    if (!record_dir.empty() && direct_io) args.push_back("--record-direct-io");
+    if (!record_dir.empty() && !direct_io) args.push_back("--record-buffered-io");
     std::vector<char*> argv;
     for (auto& a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
@@ -459,7 +459,9 @@ Runner AddRecordBench(CLI::App& sub) {
   sub.add_flag("--concurrent", o->concurrent,
                "run each round's off and on servers at once, each under its own ave-loadgen (the same moment's "
                "machine load on both; twice the load on the machine)");
-  sub.add_flag("--direct-io", o->direct_io, "the recording servers write with O_DIRECT (ave-server --record-direct-io)");
+  sub.add_flag("--direct-io,!--buffered-io", o->direct_io,
+               "the recording servers write with O_DIRECT (ave-server's default), or through the page cache "
+               "(--buffered-io: ave-server --record-buffered-io)");
   sub.add_option("--rounds", o->rounds, "rounds of an off and an on phase, in alternating order")
       ->check(CLI::Range(1, 100))
       ->capture_default_str();
