@@ -19,7 +19,9 @@
 #include <vector>
 
 #include <opencv2/core.hpp>
+#ifndef AVE_BENCH_NO_IMGCODECS
 #include <opencv2/imgcodecs.hpp>
+#endif
 #include <opencv2/imgproc.hpp>
 
 #include "model_store/avatar/avatar_blob.h"
@@ -87,6 +89,20 @@ viewer::Projector MakeProjector(const scene::CameraSpec& c, const std::vector<ui
   p.image_rgba = rgba;
   p.image_serial = 1;
   return p;
+}
+
+// The renderer's RGBA pixels (top row first) as a PNG. ave-bench-avatars, the GPU machine's
+// build, links no image codecs (they pull GDAL and ~150 MB of libraries): it says so instead.
+void WritePng(const std::string& path, std::vector<uint8_t>& rgba, int w, int h) {
+#ifdef AVE_BENCH_NO_IMGCODECS
+  (void)rgba, (void)w, (void)h;
+  std::fprintf(stderr, "ave-bench-avatars: built without PNG output, '%s' not written (use --png '')\n", path.c_str());
+#else
+  cv::Mat shot(h, w, CV_8UC4, rgba.data());
+  cv::Mat bgr;
+  cv::cvtColor(shot, bgr, cv::COLOR_RGBA2BGR);
+  cv::imwrite(path, bgr);
+#endif
 }
 
 std::vector<uint8_t> Gradient(int w, int h) {
@@ -211,10 +227,7 @@ int Run(const AvatarBenchOptions& o, ViewerAvatarCost* out = nullptr) {
     if (n == *std::max_element(counts.begin(), counts.end()) && !o.png.empty()) {
       auto pixels = (*context)->ReadPixels();
       if (pixels.ok()) {
-        cv::Mat shot(o.height, o.width, CV_8UC4, pixels->data());
-        cv::Mat bgr;
-        cv::cvtColor(shot, bgr, cv::COLOR_RGBA2BGR);
-        cv::imwrite(o.png, bgr);
+        WritePng(o.png, *pixels, o.width, o.height);
       }
     }
     with_cylinders.push_back(o.cylinders ? time_frames(people, false) : Timing{std::nan(""), std::nan("")});
@@ -247,12 +260,7 @@ int Run(const AvatarBenchOptions& o, ViewerAvatarCost* out = nullptr) {
       if (r.Render({close}, o.width, o.height).ok()) {
         auto pixels = (*context)->ReadPixels();
         const std::string path = o.png.substr(0, o.png.rfind('.')) + "_close.png";
-        if (pixels.ok()) {
-          cv::Mat shot(o.height, o.width, CV_8UC4, pixels->data());
-          cv::Mat bgr;
-          cv::cvtColor(shot, bgr, cv::COLOR_RGBA2BGR);
-          cv::imwrite(path, bgr);
-        }
+        if (pixels.ok()) WritePng(path, *pixels, o.width, o.height);
       }
     }
   }

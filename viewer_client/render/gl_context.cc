@@ -55,7 +55,7 @@ std::string GlContext::Description() const {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Headless (EGL surfaceless + FBO)
+// Headless (EGL surfaceless or EGL device + FBO)
 
 struct HeadlessContext::Impl {
   EGLDisplay display = EGL_NO_DISPLAY;
@@ -106,31 +106,68 @@ struct HeadlessContext::Impl {
   }
 };
 
+namespace {
+
+// The headless display: Mesa's surfaceless platform (llvmpipe here, or Mesa's GPU drivers), or a
+// GPU's EGL device (EGL_EXT_platform_device: NVIDIA's driver on a server without Mesa or a
+// display). AVE_EGL_PLATFORM=surfaceless|device picks one; by default surfaceless where the client
+// extensions offer it, else the first EGL device.
+absl::StatusOr<EGLDisplay> OpenHeadlessDisplay() {
+  const char* client_extensions = eglQueryString(EGL_NO_DISPLAY, EGL_EXTENSIONS);
+  const std::string extensions = client_extensions ? client_extensions : "";
+  const bool has_surfaceless = extensions.find("EGL_MESA_platform_surfaceless") != std::string::npos;
+  const bool has_device = extensions.find("EGL_EXT_platform_device") != std::string::npos;
+  const char* env = std::getenv("AVE_EGL_PLATFORM");
+  const std::string wanted = env ? env : "";
+  if (!wanted.empty() && wanted != "surfaceless" && wanted != "device") {
+    return absl::InvalidArgumentError("AVE_EGL_PLATFORM='" + wanted + "': expected surfaceless or device");
+  }
+  const bool use_device = wanted == "device" || (wanted.empty() && !has_surfaceless && has_device);
+  if (use_device ? !has_device : !has_surfaceless) {
+    return absl::UnavailableError(use_device ? "EGL: no device platform (EGL_EXT_platform_device)"
+                                             : "EGL: no surfaceless platform (is libegl-mesa0 installed?)");
+  }
+  // Through eglGetProcAddress: epoxy only dispatches EGL 1.5 entry points once a display says
+  // it is 1.5, and there is no display yet. nullptr is EGL_DEFAULT_DISPLAY.
+  auto get_platform_display =
+      reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(eglGetProcAddress("eglGetPlatformDisplayEXT"));
+  if (get_platform_display == nullptr) {
+    return absl::UnavailableError("EGL: no eglGetPlatformDisplayEXT (is libegl-mesa0 installed?)");
+  }
+  EGLDisplay display = EGL_NO_DISPLAY;
+  if (use_device) {
+    auto query_devices = reinterpret_cast<PFNEGLQUERYDEVICESEXTPROC>(eglGetProcAddress("eglQueryDevicesEXT"));
+    EGLDeviceEXT devices[8];
+    EGLint count = 0;
+    if (query_devices == nullptr || !query_devices(8, devices, &count) || count < 1) {
+      return absl::UnavailableError("EGL: no EGL device (eglQueryDevicesEXT): " + EglErrorText());
+    }
+    display = get_platform_display(EGL_PLATFORM_DEVICE_EXT, devices[0], nullptr);
+  } else {
+    display = get_platform_display(EGL_PLATFORM_SURFACELESS_MESA, nullptr, nullptr);
+  }
+  if (display == EGL_NO_DISPLAY) {
+    return absl::UnavailableError(std::string("EGL: no ") + (use_device ? "device" : "surfaceless") +
+                                  " display: " + EglErrorText());
+  }
+  EGLint major = 0, minor = 0;
+  if (!eglInitialize(display, &major, &minor)) {
+    return absl::UnavailableError(std::string("EGL: eglInitialize on the ") + (use_device ? "device" : "surfaceless") +
+                                  " display failed: " + EglErrorText());
+  }
+  return display;
+}
+
+}  // namespace
+
 absl::StatusOr<std::unique_ptr<HeadlessContext>> CreateHeadlessContext(int width, int height) {
   if (absl::Status s = CheckSize(width, height); !s.ok()) return s;
-  const char* client_extensions = eglQueryString(EGL_NO_DISPLAY, EGL_EXTENSIONS);
-  if (client_extensions == nullptr || std::strstr(client_extensions, "EGL_MESA_platform_surfaceless") == nullptr) {
-    return absl::UnavailableError("EGL: no surfaceless platform (is libegl-mesa0 installed?)");
-  }
   auto impl = std::make_unique<HeadlessContext::Impl>();
   {
     std::lock_guard<std::mutex> lock(g_egl_mutex);
-    // Through eglGetProcAddress: epoxy only dispatches EGL 1.5 entry points once a display says
-    // it is 1.5, and there is no display yet. nullptr is EGL_DEFAULT_DISPLAY.
-    auto get_platform_display =
-        reinterpret_cast<PFNEGLGETPLATFORMDISPLAYEXTPROC>(eglGetProcAddress("eglGetPlatformDisplayEXT"));
-    if (get_platform_display == nullptr) {
-      return absl::UnavailableError("EGL: no eglGetPlatformDisplayEXT (is libegl-mesa0 installed?)");
-    }
-    EGLDisplay display = get_platform_display(EGL_PLATFORM_SURFACELESS_MESA, nullptr, nullptr);
-    if (display == EGL_NO_DISPLAY) {
-      return absl::UnavailableError("EGL: no surfaceless display (is libegl-mesa0 installed?): " + EglErrorText());
-    }
-    EGLint major = 0, minor = 0;
-    if (!eglInitialize(display, &major, &minor)) {
-      return absl::UnavailableError("EGL: eglInitialize on the surfaceless display failed: " + EglErrorText());
-    }
-    impl->display = display;
+    absl::StatusOr<EGLDisplay> display = OpenHeadlessDisplay();
+    if (!display.ok()) return display.status();
+    impl->display = *display;
     ++g_egl_users;
   }
   if (!eglBindAPI(EGL_OPENGL_API)) return absl::UnavailableError("EGL: desktop OpenGL API not available: " + EglErrorText());
