@@ -131,6 +131,23 @@ class AvatarCrowdTest : public AvatarTest {
     ASSERT_TRUE((*exact)->SetProjectors({MakeProjector(projector_, image_, 1)}).ok());
     ASSERT_TRUE((*exact)->SetAvatarSequence(avatar::MakeProceduralWalk()).ok());
   }
+  // `people` in this renderer (the view cache's path) and in `exact`: the same picture within 3
+  // levels and the same depth. The cached path's picture and depth go to `rgba` / `depth`.
+  void ExpectCachedMatchesExact(std::unique_ptr<Renderer>& exact, const std::vector<AvatarInstance>& people, int frame,
+                                std::vector<uint8_t>* rgba = nullptr, std::vector<float>* depth = nullptr) {
+    for (Renderer* r : {renderer_.get(), exact.get()}) ASSERT_TRUE(r->SetAvatars(people).ok());
+    const std::vector<uint8_t> cached = RenderViewer();
+    const std::vector<float> cached_depth = Depth(viewer_);
+    std::swap(renderer_, exact);
+    const std::vector<uint8_t> reference = RenderViewer();
+    const std::vector<float> reference_depth = Depth(viewer_);
+    std::swap(renderer_, exact);
+    const PictureDifference d = Compare(cached, reference);
+    EXPECT_LE(d.max, 3) << "frame " << frame << ": mean " << d.mean;
+    EXPECT_EQ(cached_depth, reference_depth) << "frame " << frame;
+    if (rgba) *rgba = cached;
+    if (depth) *depth = cached_depth;
+  }
 };
 
 TEST_F(AvatarCrowdTest, CachedViewFallsBackToExactAndMatchesIt) {
@@ -143,16 +160,7 @@ TEST_F(AvatarCrowdTest, CachedViewFallsBackToExactAndMatchesIt) {
     for (int k = 0; k < 40; ++k) {
       crowd.push_back({"procedural-walk", {2.0 + 1.2 * (k % 8) + 0.2 * frame, 3.0 + 1.5 * (k / 8), 0}, 0.3 * k, 0.1 * frame});
     }
-    for (Renderer* r : {renderer_.get(), exact.get()}) ASSERT_TRUE(r->SetAvatars(crowd).ok());
-    const std::vector<uint8_t> cached = RenderViewer();
-    const std::vector<float> cached_depth = Depth(viewer_);
-    std::swap(renderer_, exact);
-    const std::vector<uint8_t> reference = RenderViewer();
-    const std::vector<float> reference_depth = Depth(viewer_);
-    std::swap(renderer_, exact);
-    const PictureDifference d = Compare(cached, reference);
-    EXPECT_LE(d.max, 3) << "frame " << frame << ": mean " << d.mean;
-    EXPECT_EQ(cached_depth, reference_depth) << "frame " << frame;
+    ASSERT_NO_FATAL_FAILURE(ExpectCachedMatchesExact(exact, crowd, frame));
   }
   EXPECT_GE(renderer_->stats().views_exact_for_models, 3u);
   exact.reset();
@@ -173,16 +181,7 @@ TEST_F(AvatarCrowdTest, CrowdOnTheCachedPathMatchesExact) {
     for (int k = 0; k < 40; ++k) {
       crowd.push_back({"procedural-walk", {2.0 + 1.2 * (k % 8) + 0.2 * frame, 3.0 + 1.5 * (k / 8), 0}, 0.3 * k, 0.1 * frame});
     }
-    for (Renderer* r : {renderer_.get(), exact.get()}) ASSERT_TRUE(r->SetAvatars(crowd).ok());
-    const std::vector<uint8_t> cached = RenderViewer();
-    const std::vector<float> cached_depth = Depth(viewer_);
-    std::swap(renderer_, exact);
-    const std::vector<uint8_t> reference = RenderViewer();
-    const std::vector<float> reference_depth = Depth(viewer_);
-    std::swap(renderer_, exact);
-    const PictureDifference d = Compare(cached, reference);
-    EXPECT_LE(d.max, 3) << "frame " << frame << ": mean " << d.mean;
-    EXPECT_EQ(cached_depth, reference_depth) << "frame " << frame;
+    ASSERT_NO_FATAL_FAILURE(ExpectCachedMatchesExact(exact, crowd, frame));
   }
   const RenderStats after = renderer_->stats();
   EXPECT_EQ(after.views_exact_for_models, built.views_exact_for_models) << "the crowd took the cached path";
@@ -208,16 +207,9 @@ TEST_F(AvatarCrowdTest, FewPeopleAndTheirShadowsOnTheCachedPathMatchExact) {
     for (int k = 0; k < 6; ++k) {
       people.push_back({"procedural-walk", {3.0 + 2.5 * (k % 3) + 0.2 * frame, 4.0 + 3.0 * (k / 3), 0}, 0.7 * k, 0.1 * frame});
     }
-    for (Renderer* r : {renderer_.get(), exact.get()}) ASSERT_TRUE(r->SetAvatars(people).ok());
-    const std::vector<uint8_t> cached = RenderViewer();
-    const std::vector<float> cached_depth = Depth(viewer_);
-    std::swap(renderer_, exact);
-    const std::vector<uint8_t> reference = RenderViewer();
-    const std::vector<float> reference_depth = Depth(viewer_);
-    std::swap(renderer_, exact);
-    const PictureDifference d = Compare(cached, reference);
-    EXPECT_LE(d.max, 3) << "frame " << frame << ": mean " << d.mean;
-    EXPECT_EQ(cached_depth, reference_depth) << "frame " << frame;
+    std::vector<uint8_t> cached;
+    std::vector<float> cached_depth;
+    ASSERT_NO_FATAL_FAILURE(ExpectCachedMatchesExact(exact, people, frame, &cached, &cached_depth));
     // The people are there, and so are their shadows: ground pixels (depth as without them) that
     // the video no longer reaches.
     int person = 0, shadow = 0;
