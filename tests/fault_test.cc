@@ -33,27 +33,11 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 // The CI form; AVE_FAULT_CAMERAS / AVE_FAULT_KILLS give the full form (50 streams, 10 kills).
-int EnvInt(const char* name, int fallback) {
-  const char* v = std::getenv(name);
-  return v ? std::max(1, std::atoi(v)) : fallback;
-}
-const int kCameras = EnvInt("AVE_FAULT_CAMERAS", 10);
-const int kKills = EnvInt("AVE_FAULT_KILLS", 3);
+const int kCameras = fixtures::EnvCount("AVE_FAULT_CAMERAS", 10);
+const int kKills = fixtures::EnvCount("AVE_FAULT_KILLS", 3);
 
 using fixtures::CameraRecord;
 using fixtures::FakeSource;
-
-int FreePort() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  inet_pton(AF_INET, "127.0.0.1", &addr.sin_addr);
-  ::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
-  socklen_t len = sizeof addr;
-  ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
-  ::close(fd);
-  return ntohs(addr.sin_port);
-}
 
 class ServerProcess {
  public:
@@ -136,7 +120,7 @@ TEST(Faults, KillNineUnderLoadLosesNothingCommittedAndEveryoneIsBackWithinFiveSe
   log::MinLevel() = log::Level::kERROR;
   const auto dir = std::filesystem::temp_directory_path() / ("ave_fault_test_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
-  ServerProcess server(dir, FreePort());
+  ServerProcess server(dir, fixtures::FreeLoopbackPort());
   server.Start();
   ASSERT_TRUE(server.WaitServing(std::chrono::seconds(20))) << "server did not start";
   auto admin_channel = grpc::CreateChannel(server.address(), grpc::InsecureChannelCredentials());

@@ -45,24 +45,8 @@ namespace {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 
-int EnvInt(const char* name, int fallback) {
-  const char* v = std::getenv(name);
-  return v ? std::max(1, std::atoi(v)) : fallback;
-}
 const int kCameras = 10;
-const int kKills = EnvInt("AVE_RECORD_CRASH_KILLS", 3);
-
-int FreePort() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  inet_pton(AF_INET, "127.0.0.1", &addr.sin_addr);
-  ::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
-  socklen_t len = sizeof addr;
-  ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
-  ::close(fd);
-  return ntohs(addr.sin_port);
-}
+const int kKills = fixtures::EnvCount("AVE_RECORD_CRASH_KILLS", 3);
 
 // ave-server recording into <dir>/rec, as the demo runs it.
 class RecordingServer {
@@ -188,7 +172,7 @@ TEST(RecordCrash, KillNineWhileRecordingLeavesIndexAndSegmentsInAgreement) {
   const fs::path dir = fs::temp_directory_path() / ("ave_record_crash_test_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   fs::create_directories(dir);
-  RecordingServer server(dir, FreePort());
+  RecordingServer server(dir, fixtures::FreeLoopbackPort());
   server.Start();
   ASSERT_TRUE(server.WaitServing(std::chrono::seconds(20))) << "server did not start";
   AdminClient admin(grpc::CreateChannel(server.address(), grpc::InsecureChannelCredentials()), "admin");

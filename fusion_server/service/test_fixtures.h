@@ -1,10 +1,15 @@
 #pragma once
 // Small fixtures shared by the fusion_server service tests, the end-to-end tests and the benches
 // that start a server in-process (test-only header).
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cstdlib>
 #include <filesystem>
 #include <future>
 #include <memory>
@@ -24,6 +29,26 @@
 #include "fusion_server/service/server.h"
 
 namespace ave::fixtures {
+
+// A loopback TCP port free a moment ago (bound, read and closed), for a server process started
+// with a fixed --listen so that it can be restarted on the same address.
+inline int FreeLoopbackPort() {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  inet_pton(AF_INET, "127.0.0.1", &addr.sin_addr);
+  ::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
+  socklen_t len = sizeof addr;
+  ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len);
+  ::close(fd);
+  return ntohs(addr.sin_port);
+}
+
+// An environment variable as a count of at least 1 (a test's full form), or `fallback`.
+inline int EnvCount(const char* name, int fallback) {
+  const char* v = std::getenv(name);
+  return v ? std::max(1, std::atoi(v)) : fallback;
+}
 
 // A server on a free loopback port with its store at `store_path` and the given bootstrap tokens
 // (empty = none): the start every service and end-to-end test shares.
