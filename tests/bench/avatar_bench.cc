@@ -280,8 +280,8 @@ int Run(const AvatarBenchOptions& o, ViewerAvatarCost* out = nullptr) {
     out->sequence = walk.name;
     return 0;
   }
-  std::printf("100 avatars cost %.2f ms per frame more than none (target <= 5 ms); 100 cylinders %.2f ms; wrote %s\n",
-              per_100, per_100_cylinders, o.png.c_str());
+  std::printf("100 avatars cost %.2f ms per frame more than none (target <= 5 ms); 100 cylinders %.2f ms%s%s\n",
+              per_100, per_100_cylinders, o.png.empty() ? "" : "; wrote ", o.png.c_str());
   std::printf("{\"bench\":\"avatars\",\"width\":%d,\"height\":%d,\"frames\":%d", o.width, o.height, o.frames);
   for (size_t i = 0; i < counts.size(); ++i) {
     std::printf(",\"ms_%d_avatars\":%s,\"ms_%d_cylinders\":%s", counts[i], JsonNumber(with_avatars[i].wall_ms).c_str(),
