@@ -89,8 +89,10 @@ TEST_F(SceneTest, HardCase_ProjectorCoplanarWithWall) {
   const Camera west{PinholeIntrinsics::FromFov(kWidth, kHeight, 70), LookAt({-20, -4, 8}, {-3, 0, 3})};
   const std::vector<uint8_t> rgba = RenderFrom(west);
   const Eigen::Vector3i wall = ToRgb255(ShadedModelColor(renderer_->options(), {0.7f, 0.7f, 0.7f}, -Eigen::Vector3f::UnitX()));
-  EXPECT_TRUE(Near(PixelSeenBy(west, rgba, {-3.01, -1, 4}), wall));
-  EXPECT_TRUE(Near(PixelSeenBy(west, rgba, {-3.01, 1.5, 2}), wall));
+  for (const Eigen::Vector3d& on_wall : {Eigen::Vector3d(-3.01, -1, 4), Eigen::Vector3d(-3.01, 1.5, 2)}) {
+    const Eigen::Vector3i seen = PixelSeenBy(west, rgba, on_wall);
+    EXPECT_TRUE(Near(seen, wall)) << "at " << on_wall.transpose() << ": " << Str(seen) << ", the wall " << Str(wall);
+  }
   const Eigen::Vector3d ground(-7, -4, 0);
   const std::optional<Eigen::Vector2d> uv = coplanar.Pixel(ground);
   ASSERT_TRUE(uv && coplanar.InImage(*uv, 10));

@@ -117,7 +117,11 @@ float ProjectorWeight(vec3 position, vec3 n, vec4 clip, vec2 ndc, float inside, 
   float distance_m = max(length(to_projector), 1e-6);
   float inv_distance = 1.0 / distance_m;
   float facing = dot(n, to_projector) * inv_distance;
-  if (facing <= 0.0) return 0.0;
+  // Within 0.57 degrees of edge-on counts as facing away. The G-buffer's 8-bit normal cannot hold
+  // an exact 0 (0.5 * 255 is rounded to 127 or 128 by driver: +-0.004), so a wall in the
+  // projector's own plane read facing = +-0.004, lit on NVIDIA's driver and not on llvmpipe; and a
+  // surface that close to edge-on would smear each video pixel over a hundred of its own.
+  if (facing <= 0.01) return 0.0;
 
   // The shadow clip coordinate of position + n * distance_m * normal_offset.
   vec4 clip_shadow = vec4(clip.xy * shadow_widen, clip.zw) +
