@@ -188,6 +188,9 @@ int main(int argc, char** argv) {
   app.add_option("--position", position, "mounting position x,y,z (m, site frame) for sources without a pose");
   app.add_option("--look-at", look_at, "point x,y,z the mounted camera looks at");
   app.add_option("--fov", fov_deg, "horizontal field of view (deg) for sources without intrinsics")->capture_default_str();
+  std::string sim_footage;
+  app.add_option("--sim-footage", sim_footage,
+                 "sim sources: play this pre-rendered footage file (ave-sim footage) instead of rendering, while it lasts");
   std::string pose_mode = "truth", pose_log, intrinsics_file;
   app.add_option("--pose-mode", pose_mode, "pose of sim sources: truth, gps-imu or gps-imu-vision (fused, with covariance)")
       ->capture_default_str()->check(CLI::IsMember({"truth", "gps-imu", "gps-imu-vision"}));
@@ -250,7 +253,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   // Streaming: a simulated camera renders its next frame while this one is processed and sent.
-  ave::SourceOptions source_options{.fps = options.fps, .default_fov_deg = fov_deg, .sim_render_ahead = true};
+  ave::SourceOptions source_options{.fps = options.fps, .default_fov_deg = fov_deg, .sim_render_ahead = true, .sim_footage = sim_footage};
   if (!intrinsics_file.empty()) {
     auto intrinsics = ave::calib::ReadIntrinsicsFile(intrinsics_file);
     if (!intrinsics.ok()) {

@@ -267,11 +267,17 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
         ++stats_.frames_captured;
       }
       const int quality = hint_quality.load() > 0 ? hint_quality.load() : options_.jpeg_quality;
+      // A source that delivers JPEG at the quality asked (pre-rendered sim footage) is sent as it
+      // came; anything else is encoded here.
       std::vector<uchar> jpeg;
-      const cv::Mat image(frame->height, frame->width, CV_8UC3, frame->bgr.data());
-      if (!cv::imencode(".jpg", image, jpeg, {cv::IMWRITE_JPEG_QUALITY, quality})) {
-        AVE_LOG(ERROR) << "camera '" << id << "': JPEG encoding failed";
-        continue;
+      if (!frame->jpeg.empty() && frame->jpeg_quality == quality) {
+        jpeg = std::move(frame->jpeg);
+      } else {
+        const cv::Mat image(frame->height, frame->width, CV_8UC3, frame->bgr.data());
+        if (!cv::imencode(".jpg", image, jpeg, {cv::IMWRITE_JPEG_QUALITY, quality})) {
+          AVE_LOG(ERROR) << "camera '" << id << "': JPEG encoding failed";
+          continue;
+        }
       }
       v1::SensorMessage message;
       *message.mutable_frame() = metadata_of(*frame);
