@@ -172,6 +172,10 @@ int main(int argc, char** argv) {
   app.add_option("--lidar-max-points", lidar_max_points, "LiDAR sources: at most this many people points a sweep (thinned evenly)")
       ->capture_default_str()->check(ave::cli::Range(1, 65535));
   app.add_option("--fps", options.fps, "frames per second to send")->capture_default_str()->check(ave::cli::Range(0.1, 240.0));
+  int64_t pace_max_lag_ms = options.pace_max_lag.count();
+  app.add_option("--pace-max-lag", pace_max_lag_ms,
+                 "ms a paced source (sim, file) may run behind its frame schedule and catch up (0: a late frame restarts it)")
+      ->capture_default_str()->check(ave::cli::Range(0, 10000));
   app.add_option("--jpeg-quality", options.jpeg_quality, "JPEG quality 1..100")->capture_default_str()->check(ave::cli::Range(1, 100));
   app.add_option("--max-frames", options.max_frames, "stop after N frames (0 = never)")->capture_default_str();
   app.add_option("--duration", options.duration_s, "stop after S seconds (0 = never)")->capture_default_str();
@@ -222,6 +226,7 @@ int main(int argc, char** argv) {
     return RunDetectOnly(source_spec, options, fov_deg, detector_options, tracks_out,
                          latency_s < 0 ? detector_options.tracker.validate_s : latency_s);
   }
+  options.pace_max_lag = std::chrono::milliseconds(pace_max_lag_ms);
   if (options.camera_id.empty()) {
     std::cerr << "ave-agent: --camera is required (unless --detect-only)\n";
     return 2;

@@ -26,6 +26,7 @@
 #include "fusion_server/admin/admin_client.h"
 #include "fusion_server/service/test_fixtures.h"
 #include "model_store/scene/campus.h"
+#include "sensor_agent/sim/footage.h"
 #include "viewer_client/client/scene_client.h"
 
 namespace ave {
@@ -164,7 +165,7 @@ int64_t SummaryField(const std::string& summary, const std::string& name) {
 // frames pre-rendered once by `ave-sim footage` and played by the agent's sim source at the same
 // scene times. The campus camera compresses its own frames (jpeg_artefacts), so the footage keeps
 // those bytes and they decode to the live render bit for bit: the pose front end (which decodes
-// and runs on every frame) gives the same poses, and the agent's encoder the same bytes.
+// and runs on every frame) gives the same poses; the agent sends the camera's bytes.
 TEST(PoseEndToEnd, AgentInVisionModeStreamsPosesNearTheTruth) {
   AgentRun live;
   StreamBackpackAndCheckPoses({}, &live);
@@ -176,14 +177,23 @@ TEST(PoseEndToEnd, AgentInVisionModeStreamsPosesNearTheTruth) {
   const std::string make = std::string(AVE_BIN_DIR) + "/ave-sim footage --scenario campus --camera backpack --fps 30 --seconds " +
                            std::to_string(kFrames / kFps + 1.0) + " --out " + footage + " > " + (dir / "sim.out").string();
   ASSERT_EQ(std::system(make.c_str()), 0) << make;
+  absl::StatusOr<sim::Footage> footage_file = sim::Footage::Open(footage, *sim::MakeFootageKey("campus", "backpack", kFps, 0, 0));
+  ASSERT_TRUE(footage_file.ok()) << footage_file.status();
   AgentRun played;
   StreamBackpackAndCheckPoses({"--sim-footage", footage}, &played);
   std::filesystem::remove_all(dir);
   if (::testing::Test::HasFatalFailure()) return;
   EXPECT_THAT(played.log, ::testing::HasSubstr("playing footage " + footage + ": 180 frames"));
   EXPECT_THAT(played.log, ::testing::Not(::testing::HasSubstr("rendering live"))) << "every frame came from the footage";
-  EXPECT_EQ(SummaryField(played.summary, "bytes_sent"), SummaryField(live.summary, "bytes_sent"))
-      << "the same JPEG bytes sent\nlive: " << live.summary << "played: " << played.summary;
+  // The agent forwards the camera's own JPEG (q70) instead of encoding its decoded image at q80.
+  absl::StatusOr<sim::FootageKey> key = sim::MakeFootageKey("campus", "backpack", kFps, 0, 0);
+  ASSERT_TRUE(key.ok()) << key.status();
+  EXPECT_TRUE(key->camera_jpeg);
+  EXPECT_EQ(key->jpeg_quality, 70);
+  int64_t footage_bytes = 0;
+  for (int k = 0; k < kFrames; ++k) footage_bytes += static_cast<int64_t>(footage_file->Jpeg(k).size());
+  EXPECT_EQ(SummaryField(played.summary, "bytes_sent"), footage_bytes) << played.summary;
+  EXPECT_LT(footage_bytes, SummaryField(live.summary, "bytes_sent")) << "q70 camera bytes, not a q80 re-encoding";
   int same = 0;
   for (const auto& [sequence, pose] : played.poses) {
     const auto it = live.poses.find(sequence);

@@ -33,7 +33,7 @@ struct CapturedFrame {
   std::vector<double> pose_covariance;
   // The frame as the camera delivered it, JPEG-encoded at `jpeg_quality` (pre-rendered sim
   // footage, issue 19); `bgr` is then its decoded image. Empty: the source delivered pixels only.
-  // The agent sends these bytes as they are when it asks for the same quality.
+  // The agent sends these bytes as they are unless it asks for a lower quality.
   std::vector<uint8_t> jpeg;
   int jpeg_quality = 0;
 };
