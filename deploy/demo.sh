@@ -73,7 +73,7 @@ if [ "$backpack_demo" = 1 ] && [ "${AVE_DEMO_BACKPACK_FOOTAGE_S:-10}" != 0 ]; th
     exec 8>"$build/demo-footage.lock"
     flock 8
     if [ -e "$footage" ] && [ "$bin/ave-sim" -nt "$footage" ]; then rm -f "$footage"; fi
-    exec "$bin/ave-sim" footage --scenario campus --camera backpack --fps "$backpack_fps" \
+    exec "$bin/ave-sim" footage --scenario campus --camera backpack --fps "$backpack_fps" --threads 2 \
       --seconds "${AVE_DEMO_BACKPACK_FOOTAGE_S:-10}" --out "$footage"
   ) >"$out/footage.out" 2>"$out/footage.log" &
   footage_pid=$!

@@ -6,6 +6,7 @@
 #include <fstream>
 #include <iterator>
 #include <sstream>
+#include <thread>
 
 #include <unistd.h>
 
@@ -213,27 +214,48 @@ absl::Status Footage::Verify(const SimulatedCamera& camera) const {
 }
 
 absl::Status WriteFootage(const std::string& path, const FootageKey& key, const SimulatedCamera& camera, int64_t frames) {
+  return WriteFootage(path, key, std::vector<const SimulatedCamera*>{&camera}, frames);
+}
+
+absl::Status WriteFootage(const std::string& path, const FootageKey& key, const std::vector<const SimulatedCamera*>& cameras,
+                          int64_t frames) {
   if (frames <= 0) return absl::InvalidArgumentError(absl::StrCat(path, ": footage needs at least one frame"));
   if (!(key.fps > 0)) return absl::InvalidArgumentError(absl::StrCat(path, ": footage key fps must be > 0"));
   if (key.jpeg_quality < 1 || key.jpeg_quality > 100) {
     return absl::InvalidArgumentError(absl::StrCat(path, ": footage JPEG quality must be in 1..100, not ", key.jpeg_quality));
   }
-  std::vector<std::vector<uint8_t>> jpegs;
-  jpegs.reserve(static_cast<size_t>(frames));
-  for (int64_t k = 0; k < frames; ++k) {
-    const SimImage image = camera.Frame(k, key.start_s + static_cast<double>(k) / key.fps);
-    if (image.width != key.width || image.height != key.height) {
-      return absl::InvalidArgumentError(absl::StrCat(path, ": camera '", key.camera_id, "' renders ", image.width, "x", image.height,
-                                                     ", the footage key says ", key.width, "x", key.height));
+  if (cameras.empty()) return absl::InvalidArgumentError(absl::StrCat(path, ": no camera to render footage with"));
+  // Frame k is rendered by camera k % n on thread k % n (a SimulatedCamera renders one frame at a
+  // time; every frame depends on (seed, k) only, so which instance renders it does not matter).
+  std::vector<std::vector<uint8_t>> jpegs(static_cast<size_t>(frames));
+  std::vector<absl::Status> failed(cameras.size());
+  auto render = [&](size_t worker) {
+    for (int64_t k = static_cast<int64_t>(worker); k < frames; k += static_cast<int64_t>(cameras.size())) {
+      const SimImage image = cameras[worker]->Frame(k, key.start_s + static_cast<double>(k) / key.fps);
+      if (image.width != key.width || image.height != key.height) {
+        failed[worker] = absl::InvalidArgumentError(absl::StrCat(path, ": camera '", key.camera_id, "' renders ", image.width, "x",
+                                                                 image.height, ", the footage key says ", key.width, "x", key.height));
+        return;
+      }
+      if (image.jpeg.empty() == key.camera_jpeg) {
+        failed[worker] = absl::InvalidArgumentError(absl::StrCat(path, ": camera '", key.camera_id, "' ",
+                                                                 key.camera_jpeg ? "delivers no JPEG of its own" : "delivers its own JPEG",
+                                                                 ", the footage key says otherwise"));
+        return;
+      }
+      jpegs[static_cast<size_t>(k)] = FootageFrameBytes(image, key.jpeg_quality);
+      if (jpegs[static_cast<size_t>(k)].empty()) {
+        failed[worker] = absl::InternalError(absl::StrCat(path, ": JPEG encoding failed at frame ", k));
+        return;
+      }
     }
-    if (image.jpeg.empty() == key.camera_jpeg) {
-      return absl::InvalidArgumentError(absl::StrCat(path, ": camera '", key.camera_id, "' ",
-                                                     key.camera_jpeg ? "delivers no JPEG of its own" : "delivers its own JPEG",
-                                                     ", the footage key says otherwise"));
-    }
-    jpegs.push_back(FootageFrameBytes(image, key.jpeg_quality));
-    if (jpegs.back().empty()) return absl::InternalError(absl::StrCat(path, ": JPEG encoding failed at frame ", k));
-  }
+  };
+  std::vector<std::thread> threads;
+  for (size_t w = 1; w < cameras.size(); ++w) threads.emplace_back(render, w);
+  render(0);
+  for (std::thread& t : threads) t.join();
+  for (const absl::Status& f : failed)
+    if (!f.ok()) return f;
   std::string head(kMagic, sizeof(kMagic));
   const std::string key_text = key.Text();
   Put<uint32_t>(head, static_cast<uint32_t>(key_text.size()));
@@ -270,6 +292,13 @@ absl::Status WriteFootage(const std::string& path, const FootageKey& key, const 
 
 absl::StatusOr<EnsuredFootage> EnsureFootage(const std::string& path, const FootageKey& key, const SimulatedCamera& camera,
                                              int64_t frames) {
+  return EnsureFootage(path, key, std::vector<const SimulatedCamera*>{&camera}, frames);
+}
+
+absl::StatusOr<EnsuredFootage> EnsureFootage(const std::string& path, const FootageKey& key,
+                                             const std::vector<const SimulatedCamera*>& cameras, int64_t frames) {
+  if (cameras.empty()) return absl::InvalidArgumentError(absl::StrCat(path, ": no camera to check footage with"));
+  const SimulatedCamera& camera = *cameras.front();
   EnsuredFootage result;
   absl::StatusOr<Footage> footage = Footage::Open(path, key);
   absl::Status why = footage.status();
@@ -288,7 +317,7 @@ absl::StatusOr<EnsuredFootage> EnsureFootage(const std::string& path, const Foot
   if (!absl::IsNotFound(why)) {
     AVE_LOG(WARNING) << why.message() << "; re-rendering its " << frames << " frames";
   }
-  if (absl::Status written = WriteFootage(path, key, camera, frames); !written.ok()) return written;
+  if (absl::Status written = WriteFootage(path, key, cameras, frames); !written.ok()) return written;
   result.frames = frames;
   return result;
 }

@@ -98,6 +98,10 @@ class Footage {
 // file renamed into place, so a reader never sees half a file). `camera` must be the key's camera
 // in the key's scenario (the caller's contract; Verify checks it when the file is opened).
 absl::Status WriteFootage(const std::string& path, const FootageKey& key, const SimulatedCamera& camera, int64_t frames);
+// The same on one thread per camera in `cameras`: each must be its own instance of the key's camera
+// (a SimulatedCamera renders one frame at a time); the file is the same byte for byte.
+absl::Status WriteFootage(const std::string& path, const FootageKey& key, const std::vector<const SimulatedCamera*>& cameras,
+                          int64_t frames);
 
 struct EnsuredFootage {
   bool rendered = false;  // false: the file was already good
@@ -108,5 +112,8 @@ struct EnsuredFootage {
 // frames, logs why (a WARNING line naming the file, except for a missing one) and renders it anew.
 absl::StatusOr<EnsuredFootage> EnsureFootage(const std::string& path, const FootageKey& key, const SimulatedCamera& camera,
                                              int64_t frames);
+// The same, rendering on one thread per camera (WriteFootage); the first checks the file.
+absl::StatusOr<EnsuredFootage> EnsureFootage(const std::string& path, const FootageKey& key,
+                                             const std::vector<const SimulatedCamera*>& cameras, int64_t frames);
 
 }  // namespace ave::sim

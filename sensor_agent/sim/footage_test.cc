@@ -93,6 +93,15 @@ TEST_F(FootageTest, PlaysBackTheRenderedJpegBytesAtTheSameTimes) {
   EXPECT_THAT(Footage::Open(footage_path_, q90).status().message(), HasSubstr("JPEG quality 80, not 90"));
 }
 
+TEST_F(FootageTest, ThreadsRenderTheSameFileByteForByte) {
+  const SimulatedCamera one = Camera(scenario_.seed), two = Camera(scenario_.seed), three = Camera(scenario_.seed);
+  ASSERT_TRUE(WriteFootage(footage_path_, key_, one, 5).ok());
+  const std::vector<uint8_t> single = FileBytes();
+  ASSERT_TRUE(WriteFootage(footage_path_, key_, {&one, &two, &three}, 5).ok());
+  EXPECT_EQ(FileBytes(), single);
+  EXPECT_THAT(WriteFootage(footage_path_, key_, std::vector<const SimulatedCamera*>{}, 5).message(), HasSubstr("no camera"));
+}
+
 TEST_F(FootageTest, CorruptFileIsDetectedAndRerenderedWithALogLineNamingIt) {
   const SimulatedCamera camera = Camera(scenario_.seed);
   ASSERT_TRUE(WriteFootage(footage_path_, key_, camera, 3).ok());
