@@ -36,6 +36,7 @@ lidar_demo=${AVE_DEMO_ROTATING_LIDAR:-1}
 # pose fused from its GPS, inertial sensor and the video itself (--pose-mode gps-imu-vision).
 # AVE_DEMO_BACKPACK=0 leaves it out.
 backpack_demo=${AVE_DEMO_BACKPACK:-1}
+backpack_fps=${AVE_DEMO_BACKPACK_FPS:-30}
 sensors="cam1 cam2 cam3"
 [ "$backpack_demo" = 1 ] && sensors="$sensors backpack"
 [ "$lidar_demo" = 1 ] && sensors="$sensors hdl"
@@ -51,6 +52,33 @@ cleanup() {
   exit $status
 }
 trap cleanup EXIT INT TERM
+
+# Issue 19 (session rate19): the backpack camera's frames pre-rendered once per build folder
+# (ave-sim footage; again when ave-sim was rebuilt, or when the file is corrupt or stale) and
+# played by its agent at the scenario's times (--sim-footage): its ~33 ms render is the simulator
+# standing in for a physical camera, which delivers frames for free. The camera's own JPEG is kept,
+# so the pose and the bytes sent are those of the live render. Rendered in the background while the
+# model, the server and the avatar are made; the agent waits for it. The path's back-and-forth
+# period is 210 s (6,300 frames, ~3.7 CPU minutes: far more than a demo needs or a first demo can
+# wait for); the headless demo streams the backpack for 6-13 s, so 10 s are made (300 frames,
+# ~7 MB, ~11 CPU seconds; AVE_DEMO_BACKPACK_FOOTAGE_S) and later frames are rendered live.
+# AVE_DEMO_BACKPACK_FOOTAGE_S=0: no footage, every frame rendered live.
+footage=""
+footage_pid=""
+if [ "$backpack_demo" = 1 ] && [ "${AVE_DEMO_BACKPACK_FOOTAGE_S:-10}" != 0 ]; then
+  footage=$build/demo-footage/backpack-${backpack_fps}fps.avfoot
+  mkdir -p "$build/demo-footage"
+  (
+    # Two demos may share a build folder: one renders, the other waits and finds the file good.
+    exec 8>"$build/demo-footage.lock"
+    flock 8
+    if [ -e "$footage" ] && [ "$bin/ave-sim" -nt "$footage" ]; then rm -f "$footage"; fi
+    exec "$bin/ave-sim" footage --scenario campus --camera backpack --fps "$backpack_fps" --threads 2 \
+      --seconds "${AVE_DEMO_BACKPACK_FOOTAGE_S:-10}" --out "$footage"
+  ) >"$out/footage.out" 2>"$out/footage.log" &
+  footage_pid=$!
+  pids+=("$footage_pid")
+fi
 
 # The static model (issue 4): the simulated airborne LiDAR survey of the campus through ave-model
 # (terrain + buildings) into the store; ave-server serves the newest static model in it. A few
@@ -127,11 +155,22 @@ done
 echo "demo: 3 simulated camera agents streaming, detecting and tracking moving objects"
 if [ "$backpack_demo" = 1 ]; then
   bp_token=$("$bin/ave-admin" --server "$server" issue-token --role sensor --camera backpack --label "demo backpack" 2>/dev/null)
-  "$bin/ave-agent" --server "$server" --camera backpack --source "sim:campus#backpack" --fps "${AVE_DEMO_BACKPACK_FPS:-30}" \
-    --pose-mode gps-imu-vision --token "$bp_token" --tls-cert "$certs/sensor-backpack.pem" --tls-key "$certs/sensor-backpack.key" \
+  footage_args=()
+  if [ -n "$footage_pid" ]; then
+    if wait "$footage_pid"; then
+      footage_args=(--sim-footage "$footage")
+      # A corrupt or stale file was re-rendered: say so (the line names the file and why).
+      if [ -s "$out/footage.log" ]; then sed 's/^/demo: /' "$out/footage.log"; fi
+      echo "demo: the backpack camera's footage: $(cat "$out/footage.out")"
+    else
+      echo "demo: ave-sim footage failed ($(tail -1 "$out/footage.log")); the backpack's frames are rendered live" >&2
+    fi
+  fi
+  "$bin/ave-agent" --server "$server" --camera backpack --source "sim:campus#backpack" --fps "$backpack_fps" \
+    --pose-mode gps-imu-vision ${footage_args[@]+"${footage_args[@]}"} --token "$bp_token" --tls-cert "$certs/sensor-backpack.pem" --tls-key "$certs/sensor-backpack.key" \
     >"$out/agent-backpack.out" 2>"$out/agent-backpack.log" &
   pids+=("$!")
-  echo "demo: the backpack camera's agent streaming at ${AVE_DEMO_BACKPACK_FPS:-30} Hz with its GPS + inertial + vision pose"
+  echo "demo: the backpack camera's agent streaming at $backpack_fps Hz with its GPS + inertial + vision pose"
 fi
 if [ "$lidar_demo" = 1 ]; then
   # Registered like a camera (audited), with its own sensor-bound token. The position is the

@@ -172,6 +172,10 @@ int main(int argc, char** argv) {
   app.add_option("--lidar-max-points", lidar_max_points, "LiDAR sources: at most this many people points a sweep (thinned evenly)")
       ->capture_default_str()->check(ave::cli::Range(1, 65535));
   app.add_option("--fps", options.fps, "frames per second to send")->capture_default_str()->check(ave::cli::Range(0.1, 240.0));
+  int64_t pace_max_lag_ms = options.pace_max_lag.count();
+  app.add_option("--pace-max-lag", pace_max_lag_ms,
+                 "ms a paced source (sim, file) may run behind its frame schedule and catch up (0: a late frame restarts it)")
+      ->capture_default_str()->check(ave::cli::Range(0, 10000));
   app.add_option("--jpeg-quality", options.jpeg_quality, "JPEG quality 1..100")->capture_default_str()->check(ave::cli::Range(1, 100));
   app.add_option("--max-frames", options.max_frames, "stop after N frames (0 = never)")->capture_default_str();
   app.add_option("--duration", options.duration_s, "stop after S seconds (0 = never)")->capture_default_str();
@@ -188,6 +192,9 @@ int main(int argc, char** argv) {
   app.add_option("--position", position, "mounting position x,y,z (m, site frame) for sources without a pose");
   app.add_option("--look-at", look_at, "point x,y,z the mounted camera looks at");
   app.add_option("--fov", fov_deg, "horizontal field of view (deg) for sources without intrinsics")->capture_default_str();
+  std::string sim_footage;
+  app.add_option("--sim-footage", sim_footage,
+                 "sim sources: play this pre-rendered footage file (ave-sim footage) instead of rendering, while it lasts");
   std::string pose_mode = "truth", pose_log, intrinsics_file;
   app.add_option("--pose-mode", pose_mode, "pose of sim sources: truth, gps-imu or gps-imu-vision (fused, with covariance)")
       ->capture_default_str()->check(CLI::IsMember({"truth", "gps-imu", "gps-imu-vision"}));
@@ -219,6 +226,7 @@ int main(int argc, char** argv) {
     return RunDetectOnly(source_spec, options, fov_deg, detector_options, tracks_out,
                          latency_s < 0 ? detector_options.tracker.validate_s : latency_s);
   }
+  options.pace_max_lag = std::chrono::milliseconds(pace_max_lag_ms);
   if (options.camera_id.empty()) {
     std::cerr << "ave-agent: --camera is required (unless --detect-only)\n";
     return 2;
@@ -250,7 +258,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   // Streaming: a simulated camera renders its next frame while this one is processed and sent.
-  ave::SourceOptions source_options{.fps = options.fps, .default_fov_deg = fov_deg, .sim_render_ahead = true};
+  ave::SourceOptions source_options{.fps = options.fps, .default_fov_deg = fov_deg, .sim_render_ahead = true, .sim_footage = sim_footage};
   if (!intrinsics_file.empty()) {
     auto intrinsics = ave::calib::ReadIntrinsicsFile(intrinsics_file);
     if (!intrinsics.ok()) {

@@ -45,6 +45,10 @@ grep -q "backpack.*pose gps-imu-vision" "$out/agent-backpack.log" ||
 bp_frames=$(sed -n 's/.*"frames_sent":\([0-9]*\).*"frames_per_s":\([0-9.e+-]*\).*/\1 \2/p' "$out/agent-backpack.out")
 [ "${bp_frames%% *}" -gt 0 ] 2>/dev/null || { echo "FAIL: the backpack agent sent no frames (agent-backpack.out: $(cat "$out/agent-backpack.out"))"; exit 1; }
 echo "backpack agent: frames sent and frames/s: $bp_frames"
+# Issue 19 (session rate19): the backpack's frames come from the footage ave-sim made for this
+# build folder, not from a render per frame.
+grep -q "camera 'backpack': playing footage .*backpack-30fps.avfoot" "$out/agent-backpack.log" ||
+  { echo "FAIL: the backpack agent played no footage ($(head -3 "$out/agent-backpack.log"); footage.log: $(tail -2 "$out/footage.log" 2>/dev/null))"; exit 1; }
 if pgrep -f "$out/ave.db" >/dev/null; then echo "FAIL: a demo process is still running"; exit 1; fi
 # The window path (the same demo with a GLFW window under Xvfb) is run by ave_window_input_test and
 # ave_window_replay_test, which drive it; running it here as well doubled this test's time (a whole

@@ -20,11 +20,13 @@
 #include <thread>
 #include <vector>
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include "fusion_server/admin/admin_client.h"
 #include "fusion_server/service/test_fixtures.h"
 #include "model_store/scene/campus.h"
+#include "sensor_agent/sim/footage.h"
 #include "viewer_client/client/scene_client.h"
 
 namespace ave {
@@ -46,7 +48,15 @@ double Quantile(std::vector<double> v, double q) {
   return v.empty() ? NAN : v[std::min(v.size() - 1, static_cast<size_t>(q * v.size()))];
 }
 
-TEST(PoseEndToEnd, AgentInVisionModeStreamsPosesNearTheTruth) {
+struct AgentRun {
+  std::string summary;  // the agent's summary line (JSON)
+  std::string log;      // its stderr
+  std::map<uint64_t, Rigid3d> poses;  // the poses a viewer received, by frame sequence
+};
+
+// Runs `ave-agent --pose-mode gps-imu-vision` on the backpack camera (plus `extra` flags) against
+// a real server core and checks every frame sent and the poses a viewer receives.
+void StreamBackpackAndCheckPoses(const std::vector<std::string>& extra, AgentRun* run) {
   fixtures::LocalServer server{"ave_pose_e2e"};
   const absl::Status started = server.Start(server.Options(kSensor, kViewer, kAdmin));
   ASSERT_TRUE(started.ok()) << started;
@@ -60,15 +70,20 @@ TEST(PoseEndToEnd, AgentInVisionModeStreamsPosesNearTheTruth) {
   const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("ave_pose_e2e_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
   const std::string out = (dir / "agent.out").string(), log = (dir / "agent.log").string();
+  std::fflush(stdout);  // else the child flushes our buffered lines a second time
   const pid_t agent = ::fork();
   if (agent == 0) {
     std::freopen(out.c_str(), "w", stdout);
     std::freopen(log.c_str(), "w", stderr);
     const std::string bin = std::string(AVE_BIN_DIR) + "/ave-agent";
     const std::string fps = std::to_string(static_cast<int>(kFps)), frames = std::to_string(kFrames);
-    execl(bin.c_str(), bin.c_str(), "--server", server.address().c_str(), "--camera", "backpack", "--token", kSensor, "--source",
-          "sim:campus#backpack", "--fps", fps.c_str(), "--max-frames", frames.c_str(), "--pose-mode", "gps-imu-vision",
-          static_cast<char*>(nullptr));
+    std::vector<std::string> args = {bin, "--server", server.address(), "--camera", "backpack", "--token", kSensor, "--source",
+                                     "sim:campus#backpack", "--fps", fps, "--max-frames", frames, "--pose-mode", "gps-imu-vision"};
+    args.insert(args.end(), extra.begin(), extra.end());
+    std::vector<char*> argv;
+    for (std::string& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    execv(bin.c_str(), argv.data());
     std::_Exit(127);
   }
   ASSERT_GT(agent, 0);
@@ -112,6 +127,9 @@ TEST(PoseEndToEnd, AgentInVisionModeStreamsPosesNearTheTruth) {
   EXPECT_EQ(std::stoi(m[1]), kFrames) << line;
   ASSERT_TRUE(std::regex_search(line, m, std::regex("\"frames_per_s\":([0-9.]+)"))) << line;
   std::printf("agent summary: %s", line.c_str());
+  run->summary = line;
+  run->log = agent_log.str();
+  run->poses = poses;
 
   // Poses against the truth of their frame, from 2 s on (the vision lock takes its first frames).
   std::vector<double> position_m, angle_deg;
@@ -135,6 +153,56 @@ TEST(PoseEndToEnd, AgentInVisionModeStreamsPosesNearTheTruth) {
   EXPECT_LT(ang_p90, 0.8);
   EXPECT_LT(pos_median, 0.5);
   EXPECT_LT(pos_p90, 1.0);
+}
+
+int64_t SummaryField(const std::string& summary, const std::string& name) {
+  std::smatch m;
+  if (!std::regex_search(summary, m, std::regex("\"" + name + "\":(\\d+)"))) return -1;
+  return std::stoll(m[1]);
+}
+
+// The live render first; then the demo's way (issue 19, session rate19): the backpack camera's
+// frames pre-rendered once by `ave-sim footage` and played by the agent's sim source at the same
+// scene times. The campus camera compresses its own frames (jpeg_artefacts), so the footage keeps
+// those bytes and they decode to the live render bit for bit: the pose front end (which decodes
+// and runs on every frame) gives the same poses; the agent sends the camera's bytes.
+TEST(PoseEndToEnd, AgentInVisionModeStreamsPosesNearTheTruth) {
+  AgentRun live;
+  StreamBackpackAndCheckPoses({}, &live);
+  if (::testing::Test::HasFatalFailure()) return;
+
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() / ("ave_pose_e2e_footage_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const std::string footage = (dir / "backpack.avfoot").string();
+  const std::string make = std::string(AVE_BIN_DIR) + "/ave-sim footage --scenario campus --camera backpack --fps 30 --seconds " +
+                           std::to_string(kFrames / kFps + 1.0) + " --out " + footage + " > " + (dir / "sim.out").string();
+  ASSERT_EQ(std::system(make.c_str()), 0) << make;
+  absl::StatusOr<sim::Footage> footage_file = sim::Footage::Open(footage, *sim::MakeFootageKey("campus", "backpack", kFps, 0, 0));
+  ASSERT_TRUE(footage_file.ok()) << footage_file.status();
+  AgentRun played;
+  StreamBackpackAndCheckPoses({"--sim-footage", footage}, &played);
+  std::filesystem::remove_all(dir);
+  if (::testing::Test::HasFatalFailure()) return;
+  EXPECT_THAT(played.log, ::testing::HasSubstr("playing footage " + footage + ": 180 frames"));
+  EXPECT_THAT(played.log, ::testing::Not(::testing::HasSubstr("rendering live"))) << "every frame came from the footage";
+  // The agent forwards the camera's own JPEG (q70) instead of encoding its decoded image at q80.
+  absl::StatusOr<sim::FootageKey> key = sim::MakeFootageKey("campus", "backpack", kFps, 0, 0);
+  ASSERT_TRUE(key.ok()) << key.status();
+  EXPECT_TRUE(key->camera_jpeg);
+  EXPECT_EQ(key->jpeg_quality, 70);
+  int64_t footage_bytes = 0;
+  for (int k = 0; k < kFrames; ++k) footage_bytes += static_cast<int64_t>(footage_file->Jpeg(k).size());
+  EXPECT_EQ(SummaryField(played.summary, "bytes_sent"), footage_bytes) << played.summary;
+  EXPECT_LT(footage_bytes, SummaryField(live.summary, "bytes_sent")) << "q70 camera bytes, not a q80 re-encoding";
+  int same = 0;
+  for (const auto& [sequence, pose] : played.poses) {
+    const auto it = live.poses.find(sequence);
+    if (it == live.poses.end()) continue;
+    EXPECT_LT((pose.translation - it->second.translation).norm(), 1e-9) << "frame " << sequence;
+    EXPECT_LT(Eigen::AngleAxisd(it->second.rotation.inverse() * pose.rotation).angle(), 1e-9) << "frame " << sequence;
+    ++same;
+  }
+  EXPECT_GE(same, 30) << "frames both runs' viewers saw";
 }
 
 }  // namespace

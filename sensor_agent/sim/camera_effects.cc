@@ -126,7 +126,10 @@ void ApplyJpegArtefacts(const EffectParams& params, SimImage& image) {
   std::vector<uint8_t> jpeg;
   cv::imencode(".jpg", bgr, jpeg, {cv::IMWRITE_JPEG_QUALITY, quality});
   const cv::Mat decoded = cv::imdecode(jpeg, cv::IMREAD_COLOR);
-  if (decoded.size() == bgr.size() && decoded.isContinuous()) std::copy(decoded.data, decoded.data + image.bgr.size(), image.bgr.begin());
+  if (decoded.size() == bgr.size() && decoded.type() == CV_8UC3 && decoded.isContinuous()) {
+    std::copy(decoded.data, decoded.data + image.bgr.size(), image.bgr.begin());
+    image.jpeg = std::move(jpeg);  // the camera's own bytes (pre-rendered footage keeps them)
+  }
 }
 
 void ApplyRollingOcclusion(const EffectParams& params, uint64_t seed, double t_s, SimImage& image) {

@@ -68,6 +68,10 @@ struct SimImage {
   std::vector<uint32_t> object_id;   // one per pixel, see the id scheme above
   std::vector<uint8_t> class_id;     // one per pixel, a PixelClass
   std::vector<float> depth_m;        // one per pixel: z in the camera frame; +inf where the sky shows
+  // The camera's compressed frame, set by the jpeg_artefacts effect (the pipeline's last stage):
+  // JPEG bytes whose decoding (cv::imdecode) is exactly `bgr`. Empty without that effect; code
+  // that changes `bgr` afterwards must clear it.
+  std::vector<uint8_t> jpeg;
 
   size_t Index(int u, int v) const { return static_cast<size_t>(v) * width + u; }
 };

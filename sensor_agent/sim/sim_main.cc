@@ -4,6 +4,7 @@
 //   ave-sim airborne-lidar --scenario campus --out DIR
 //   ave-sim rotating-lidar --scenario courtyard --out DIR [--lidar hdl64 --seconds S]
 //   ave-sim studio --scenario studio --out DIR
+//   ave-sim footage --scenario campus --camera backpack --out FILE [--seconds S --fps F --quality Q --threads N]
 // A scenario is a bundled name (campus, courtyard, studio, minimal) or a .yaml path. Bad input
 // (scenario errors, unknown camera) is reported before anything is written.
 #include <cstdio>
@@ -11,12 +12,15 @@
 #include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <memory>
+#include <vector>
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include "model_store/common/cli.h"
 #include "sensor_agent/sim/camera_effects.h"
+#include "sensor_agent/sim/footage.h"
 #include "sensor_agent/sim/scenario.h"
 
 namespace {
@@ -108,6 +112,31 @@ int RunCamera(const Scenario& s, const std::string& camera_id, const fs::path& o
   return 0;
 }
 
+// Issue 19: a camera's frames pre-rendered as the agent's JPEG into one file the agent's sim
+// source plays (--sim-footage); a good file is kept, a missing, corrupt, stale or short one is
+// rendered anew (with a log line naming it and why).
+int RunFootage(const Scenario& s, const std::string& scenario_name, const std::string& camera_id, const std::string& path,
+               double seconds, double fps, double start_s, int quality, int threads) {
+  const ave::scene::CameraSpec* camera = s.world.FindCamera(camera_id);
+  if (!camera) return Fail(s.label + ": no camera '" + camera_id + "'");
+  if (fps <= 0) fps = camera->fps;
+  absl::StatusOr<ave::sim::FootageKey> key = ave::sim::MakeFootageKey(scenario_name, camera_id, fps, start_s, quality);
+  if (!key.ok()) return Fail(std::string(key.status().message()));
+  const int64_t frames = std::max<int64_t>(1, static_cast<int64_t>(std::llround(seconds * fps)));
+  // One camera instance per rendering thread (a SimulatedCamera renders one frame at a time).
+  std::vector<std::unique_ptr<ave::sim::SimulatedCamera>> sims;
+  std::vector<const ave::sim::SimulatedCamera*> cameras;
+  for (int t = 0; t < threads; ++t) {
+    sims.push_back(std::make_unique<ave::sim::SimulatedCamera>(s.world, *camera, s.EffectsForCamera(camera_id), s.seed));
+    cameras.push_back(sims.back().get());
+  }
+  absl::StatusOr<ave::sim::EnsuredFootage> made = ave::sim::EnsureFootage(path, *key, cameras, frames);
+  if (!made.ok()) return Fail(std::string(made.status().message()));
+  std::cout << "{\"footage\":\"" << path << "\",\"camera\":\"" << camera_id << "\",\"frames\":" << made->frames << ",\"fps\":" << fps
+            << ",\"rendered\":" << (made->rendered ? "true" : "false") << "}\n";
+  return 0;
+}
+
 int Report(const absl::Status& status, const std::string& what, const fs::path& out) {
   if (!status.ok()) return Fail(std::string(status.message()));
   std::cout << "{\"" << what << "\":\"" << out.string() << "\"}\n";
@@ -144,6 +173,18 @@ int main(int argc, char** argv) {
   rotating->add_option("--seconds", seconds, "duration (s)")->capture_default_str()->check(ave::cli::Range(0.0, 3600.0));
   CLI::App* studio = app.add_subcommand("studio", "multi-camera studio images with silhouettes and calibration");
   common(studio);
+  CLI::App* footage = app.add_subcommand("footage", "a camera's frames pre-rendered as JPEG into one file (ave-agent --sim-footage)");
+  std::string footage_out;
+  int quality = 80;
+  footage->add_option("--scenario", scenario_name, "bundled name (campus, courtyard, studio, minimal) or a .yaml path")->required();
+  footage->add_option("--out", footage_out, "footage file (kept when already good for this camera and simulator)")->required();
+  footage->add_option("--camera", camera_id, "camera id in the scenario")->required();
+  footage->add_option("--seconds", seconds, "scene seconds of footage")->capture_default_str()->check(ave::cli::Range(0.001, 3600.0));
+  footage->add_option("--fps", fps, "frames per second (default: the camera's fps)")->check(ave::cli::Range(0.001, 1000.0));
+  footage->add_option("--start", start_s, "scene time of the first frame (s)")->capture_default_str()->check(ave::cli::Range(-1e7, 1e7));
+  int threads = 1;
+  footage->add_option("--threads", threads, "rendering threads (frames are the same for any count)")->capture_default_str()->check(ave::cli::Range(1, 64));
+  footage->add_option("--quality", quality, "JPEG quality (the agent's --jpeg-quality)")->capture_default_str()->check(ave::cli::Range(1, 100));
   if (auto exit_code = ave::cli::Parse(app, argc, argv, "ave-sim")) return *exit_code;
 
   absl::StatusOr<Scenario> scenario = ave::sim::LoadScenario(scenario_name);
@@ -152,6 +193,7 @@ int main(int argc, char** argv) {
   const fs::path out(out_dir);
 
   if (camera->parsed()) return RunCamera(s, camera_id, out, frames, fps, start_s, format);
+  if (footage->parsed()) return RunFootage(s, scenario_name, camera_id, footage_out, seconds, fps, start_s, quality, threads);
   if (gps->parsed()) {
     ave::sim::GpsImuSpec spec;
     if (camera_id.empty()) {

@@ -4,13 +4,16 @@
 #include <future>
 
 #include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "model_store/common/log.h"
 #include "model_store/scene/campus.h"
 #include "sensor_agent/sim/camera_effects.h"
+#include "sensor_agent/sim/footage.h"
 #include "sensor_agent/sim/scenario.h"
 
 namespace ave {
@@ -22,30 +25,65 @@ int64_t WallNs() {
 }
 
 // A scenario's camera through the simulator's camera pipeline: the scenario's effects for this
-// camera, its true pose per frame (moving cameras walk their path).
+// camera, its true pose per frame (moving cameras walk their path). With a footage file, its
+// frames are played instead of rendered while it lasts (issue 19).
 class SimScenarioSource final : public FrameSource {
  public:
-  SimScenarioSource(const sim::Scenario& scenario, const scene::CameraSpec& camera, const SourceOptions& options)
+  // `scenario_name_or_path` as the spec names it (it keys the footage file).
+  SimScenarioSource(const sim::Scenario& scenario, const std::string& scenario_name_or_path, const scene::CameraSpec& camera,
+                    const SourceOptions& options)
       : scenario_name_(scenario.name),
         camera_(scenario.world, camera, scenario.EffectsForCamera(camera.id), scenario.seed),
-        options_(options) {}
+        options_(options) {
+    if (!options.sim_footage.empty()) footage_ = OpenFootage(options.sim_footage, scenario_name_or_path);
+  }
 
   ~SimScenarioSource() override {
     if (ahead_.valid()) ahead_.wait();
   }
 
   absl::StatusOr<CapturedFrame> Next() override {
-    if (!options_.sim_render_ahead) return Render(index_++);
-    absl::StatusOr<CapturedFrame> frame = ahead_.valid() ? ahead_.get() : Render(index_++);
+    if (!options_.sim_render_ahead) return Produce(index_++);
+    absl::StatusOr<CapturedFrame> frame = ahead_.valid() ? ahead_.get() : Produce(index_++);
     // The next frame renders while the caller works on this one (one Frame() at a time).
-    ahead_ = std::async(std::launch::async, [this, index = index_++] { return Render(index); });
+    ahead_ = std::async(std::launch::async, [this, index = index_++] { return Produce(index); });
     return frame;
   }
   PinholeIntrinsics intrinsics() const override { return camera_.camera().intrinsics; }
-  std::string description() const override { return "simulated " + scenario_name_ + " camera " + camera_.camera().id; }
+  std::string description() const override {
+    return "simulated " + scenario_name_ + " camera " + camera_.camera().id +
+           (footage_ ? absl::StrCat(" (footage ", footage_->path(), ", ", footage_->frames(), " frames)") : "");
+  }
   bool live() const override { return false; }
 
+
  private:
+  // Opens and verifies `path` for this camera (two renders); nullopt, with a log line naming the
+  // file and the reason, when it cannot be played.
+  std::optional<sim::Footage> OpenFootage(const std::string& path, const std::string& scenario_name_or_path) const {
+    const std::string& id = camera_.camera().id;
+    // Quality 0: footage of any quality (the agent re-encodes when it asks for another).
+    absl::StatusOr<sim::FootageKey> key = sim::MakeFootageKey(scenario_name_or_path, id, options_.fps, options_.sim_start_s, 0);
+    absl::StatusOr<sim::Footage> footage = key.ok() ? sim::Footage::Open(path, *key) : key.status();
+    const absl::Status ok = footage.ok() ? footage->Verify(camera_) : footage.status();
+    if (!ok.ok()) {
+      AVE_LOG(WARNING) << "camera '" << id << "': " << ok.message() << "; rendering every frame live (`ave-sim footage` makes the file anew)";
+      return std::nullopt;
+    }
+    AVE_LOG(INFO) << "camera '" << id << "': playing footage " << path << ": " << footage->frames() << " frames, "
+                  << footage->frames() / options_.fps << " s of scene time";
+    return std::move(*footage);
+  }
+
+  absl::StatusOr<CapturedFrame> Produce(int64_t index) const {
+    if (footage_ && index < footage_->frames()) return Play(index);
+    if (footage_ && index == footage_->frames()) {
+      AVE_LOG(INFO) << "camera '" << camera_.camera().id << "': footage " << footage_->path() << " ends after frame " << index - 1
+                    << "; rendering live from t = " << footage_->TimeOf(index) << " s";
+    }
+    return Render(index);
+  }
+
   absl::StatusOr<CapturedFrame> Render(int64_t index) const {
     CapturedFrame frame;
     frame.scene_time_s = options_.sim_start_s + static_cast<double>(index) / options_.fps;
@@ -59,9 +97,30 @@ class SimScenarioSource final : public FrameSource {
     return frame;
   }
 
+  // Frame `index` from the footage: the same scene time as Render's, the camera's JPEG bytes and
+  // their decoded image (what an agent gets from a physical camera that sends JPEG).
+  absl::StatusOr<CapturedFrame> Play(int64_t index) const {
+    CapturedFrame frame;
+    frame.scene_time_s = options_.sim_start_s + static_cast<double>(index) / options_.fps;
+    frame.capture_time_ns = WallNs();
+    frame.jpeg = footage_->Jpeg(index);
+    frame.jpeg_quality = footage_->key().jpeg_quality;
+    const cv::Mat image = cv::imdecode(frame.jpeg, cv::IMREAD_COLOR);
+    const PinholeIntrinsics& k = camera_.camera().intrinsics;
+    if (image.empty() || image.cols != k.width || image.rows != k.height || !image.isContinuous()) {
+      return absl::DataLossError(absl::StrCat(footage_->path(), ": frame ", index, " does not decode to a ", k.width, "x", k.height, " image"));
+    }
+    frame.width = image.cols;
+    frame.height = image.rows;
+    frame.bgr.assign(image.data, image.data + image.total() * 3);
+    frame.world_from_camera = camera_.PoseAt(frame.scene_time_s);
+    return frame;
+  }
+
   std::string scenario_name_;
   sim::SimulatedCamera camera_;
   SourceOptions options_;
+  std::optional<sim::Footage> footage_;
   int64_t index_ = 0;
   std::future<absl::StatusOr<CapturedFrame>> ahead_;  // sim_render_ahead: the next frame
 };
@@ -198,7 +257,7 @@ absl::StatusOr<std::unique_ptr<FrameSource>> OpenSource(const std::string& spec,
       return absl::NotFoundError(
           absl::StrCat("source '", spec, "': the ", scenario->name, " scenario has no camera '", camera_id, "' (cameras: ", known, ")"));
     }
-    return std::unique_ptr<FrameSource>(new SimScenarioSource(*scenario, *camera, options));
+    return std::unique_ptr<FrameSource>(new SimScenarioSource(*scenario, scene_name, *camera, options));
   }
   auto capture = std::make_unique<cv::VideoCapture>();
   bool live = true;

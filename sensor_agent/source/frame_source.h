@@ -31,6 +31,11 @@ struct CapturedFrame {
   // Row-major 6x6 covariance of world_from_camera (position m, world rotation vector rad), as the
   // wire Pose carries it; empty = unknown (sensor_agent/pose fills it, issue 5).
   std::vector<double> pose_covariance;
+  // The frame as the camera delivered it, JPEG-encoded at `jpeg_quality` (pre-rendered sim
+  // footage, issue 19); `bgr` is then its decoded image. Empty: the source delivered pixels only.
+  // The agent sends these bytes as they are unless it asks for a lower quality.
+  std::vector<uint8_t> jpeg;
+  int jpeg_quality = 0;
 };
 
 class FrameSource {
@@ -61,6 +66,13 @@ struct SourceOptions {
   // backpack camera's render alone takes most of a 30 Hz frame's time). Costs no extra CPU per
   // frame; one frame is rendered ahead of need.
   bool sim_render_ahead = false;
+  // Sim sources: a footage file of this camera (sensor_agent/sim/footage.h, made by `ave-sim
+  // footage`) to play instead of rendering: frame k is the file's frame k, JPEG bytes and their
+  // decoded image, at the same scene time k / fps; the true pose still comes from the scenario.
+  // Frames past the file's end are rendered live. A missing, corrupt or stale file (another
+  // scenario text, camera, fps or start; a first or last frame that no longer equals a fresh
+  // render) is logged with the reason and the file's name, and every frame is rendered live.
+  std::string sim_footage;
 };
 
 absl::StatusOr<std::unique_ptr<FrameSource>> OpenSource(const std::string& spec, const SourceOptions& options);

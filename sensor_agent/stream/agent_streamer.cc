@@ -49,6 +49,7 @@ std::string AgentOptions::Check() const {
   if (camera_id.empty()) return "camera_id is empty";
   if (!(fps > 0 && fps <= 240)) return "fps must be in (0, 240]";
   if (jpeg_quality < 1 || jpeg_quality > 100) return "jpeg_quality must be in 1..100";
+  if (pace_max_lag.count() < 0) return "pace_max_lag must be >= 0";
   if (keepalive.count() < 100 || keepalive.count() > 600000) return "keepalive must be 100 ms .. 10 min";
   if (max_frames < 0) return "max_frames must be >= 0";
   if (!(duration_s >= 0)) return "duration_s must be >= 0";
@@ -267,11 +268,18 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
         ++stats_.frames_captured;
       }
       const int quality = hint_quality.load() > 0 ? hint_quality.load() : options_.jpeg_quality;
+      // A source that delivers JPEG (pre-rendered sim footage: the camera's own bytes) is sent as
+      // it came unless a lower quality is asked (the server's hint, to save bandwidth): encoding
+      // its decoded image at a higher quality would cost CPU and bytes and add no detail.
       std::vector<uchar> jpeg;
-      const cv::Mat image(frame->height, frame->width, CV_8UC3, frame->bgr.data());
-      if (!cv::imencode(".jpg", image, jpeg, {cv::IMWRITE_JPEG_QUALITY, quality})) {
-        AVE_LOG(ERROR) << "camera '" << id << "': JPEG encoding failed";
-        continue;
+      if (!frame->jpeg.empty() && frame->jpeg_quality <= quality) {
+        jpeg = std::move(frame->jpeg);
+      } else {
+        const cv::Mat image(frame->height, frame->width, CV_8UC3, frame->bgr.data());
+        if (!cv::imencode(".jpg", image, jpeg, {cv::IMWRITE_JPEG_QUALITY, quality})) {
+          AVE_LOG(ERROR) << "camera '" << id << "': JPEG encoding failed";
+          continue;
+        }
       }
       v1::SensorMessage message;
       *message.mutable_frame() = metadata_of(*frame);
@@ -291,7 +299,7 @@ absl::Status AgentStreamer::Run(const std::atomic<bool>& stop) {
       if (acked_once) backoff = options_.backoff_initial;  // the link works again
       // Pace non-live sources: the slower of our rate and the server's hint.
       if (!source_->live()) {
-        PaceTo(next_tick, pace(), stop);
+        PaceTo(next_tick, pace(), stop, options_.pace_max_lag);
       }
     }
 

@@ -38,6 +38,10 @@ struct AgentOptions {
   std::string token;  // sensor bearer token
   std::string software_version = "ave-agent/0.1";
   double fps = 10;            // frames per second sent (the server's hint may lower it)
+  // Paced (non-live) sources keep a fixed frame schedule through a frame that ran late by up to
+  // this much (the next frames go out sooner: the camera's rate holds on average, issue 19);
+  // later than that, the schedule restarts. 0: every late frame restarts it (before issue 19).
+  std::chrono::milliseconds pace_max_lag{250};
   int jpeg_quality = 80;      // 1..100 (the server's hint may override it)
   int64_t max_frames = 0;     // stop after this many frames sent (0 = no limit)
   double duration_s = 0;      // stop after this long (0 = no limit)

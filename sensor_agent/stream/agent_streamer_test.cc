@@ -2,6 +2,7 @@
 // and the sensor clock's offset is measured and corrected (issue 8).
 #include "sensor_agent/source/fake_source.h"
 #include "sensor_agent/stream/agent_streamer.h"
+#include "sensor_agent/stream/link.h"
 
 
 #include <filesystem>
@@ -33,6 +34,30 @@ TEST(AgentOptions, PlaintextTokenToANonLoopbackServerIsRefusedUnlessTold) {
   EXPECT_EQ(options.Check(), "");
   options.tls = {.ca_file = "ca.pem"};
   EXPECT_EQ(options.Check(), "");
+}
+
+// Issue 19: a paced camera loop keeps its 30 Hz schedule through a late frame (the next frames go
+// out sooner) within the lag bound, and restarts it from now beyond (the tick arithmetic; no
+// sleeping or wall time involved).
+TEST(Pacing, ALateFrameWithinTheLagBoundKeepsTheSchedule) {
+  using stream_link::Clock;
+  using std::chrono::milliseconds;
+  const Clock::time_point t0{};  // a fixed origin: the arithmetic, not the clock
+  const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / 30));
+  // 100 ms behind the schedule: within a 250 ms bound the next tick is one period on, in the past.
+  const Clock::time_point now = t0 + milliseconds(100);
+  EXPECT_EQ(stream_link::NextTick(t0, 30, now, milliseconds(250)), t0 + period);
+  // Without a bound (before issue 19) every late frame restarted the schedule: the lost time stays lost.
+  EXPECT_EQ(stream_link::NextTick(t0, 30, now), now);
+  // Beyond the bound (a stall): restart from now rather than burst a second of frames.
+  EXPECT_EQ(stream_link::NextTick(t0, 30, t0 + milliseconds(400), milliseconds(250)), t0 + milliseconds(400));
+  // On time: one period on, whatever the bound.
+  EXPECT_EQ(stream_link::NextTick(t0, 30, t0 + milliseconds(10), milliseconds(250)), t0 + period);
+  EXPECT_EQ(stream_link::NextTick(t0, 30, t0 + milliseconds(10)), t0 + period);
+  AgentOptions options;
+  options.camera_id = "c";
+  options.pace_max_lag = milliseconds(-1);
+  EXPECT_EQ(options.Check(), "pace_max_lag must be >= 0");
 }
 
 TEST(ClockOffsetEstimator, TakesTheSmallestRoundTrip) {

@@ -22,11 +22,22 @@ inline void SleepUnlessStopped(Clock::duration duration, const std::atomic<bool>
   }
 }
 
-// Paces a loop at `hz`: moves `next_tick` on by one period (never behind now) and sleeps until it.
-inline void PaceTo(Clock::time_point& next_tick, double hz, const std::atomic<bool>& stop) {
+// The next tick of a loop paced at `hz` after `next_tick`, seen at `now`: one period on. A loop
+// late by at most `max_lag` keeps its schedule (the next ticks come sooner, so its average rate
+// holds through a slow iteration, as a camera's clock does not wait for its reader); later than
+// that, the schedule restarts from `now`.
+inline Clock::time_point NextTick(Clock::time_point next_tick, double hz, Clock::time_point now,
+                                  Clock::duration max_lag = Clock::duration::zero()) {
   next_tick += std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / hz));
-  if (next_tick < Clock::now()) next_tick = Clock::now();
-  SleepUnlessStopped(next_tick - Clock::now(), stop);
+  return next_tick < now - max_lag ? now : next_tick;
+}
+
+// Paces a loop at `hz`: moves `next_tick` on (NextTick) and sleeps until it.
+inline void PaceTo(Clock::time_point& next_tick, double hz, const std::atomic<bool>& stop,
+                   Clock::duration max_lag = Clock::duration::zero()) {
+  const Clock::time_point now = Clock::now();
+  next_tick = NextTick(next_tick, hz, now, max_lag);
+  if (next_tick > now) SleepUnlessStopped(next_tick - now, stop);
 }
 
 // Jittered exponential backoff: a random wait in [backoff/2, backoff] (the caller doubles it).

@@ -35,6 +35,7 @@
 #include "sensor_agent/pose/so3.h"
 #include "sensor_agent/pose/vision.h"
 #include "sensor_agent/sim/camera_effects.h"
+#include "sensor_agent/sim/footage.h"
 #include "sensor_agent/sim/scenario.h"
 #include "tests/bench/bench.h"
 
@@ -65,6 +66,9 @@ struct PoseBenchOptions {
   bool variants = true;  // the bus and bump scenario variants (need --seconds >= 7.2)
   bool consistency_knobs = true;  // the filter's noise model (pixel sigma, process noise) against NEES
   std::string nees_csv;  // per-frame NEES diagnostics of every row (issue 19: which axes, where)
+  // > 0: every frame JPEG-encoded at this quality and decoded before the pose sees it, as the
+  // agent's pre-rendered footage delivers frames (issue 19, session rate19); 0: the render as is.
+  int footage_jpeg_quality = 0;
 };
 
 struct Spread {
@@ -283,6 +287,11 @@ int RunPose(const PoseBenchOptions& o) {
   for (int f = 0; f < n; ++f) {
     frames.push_back(sim_camera.Frame(f, f / 30.0));
     truth.push_back(sim_camera.PoseAt(f / 30.0));
+    if (o.footage_jpeg_quality > 0) {
+      const std::vector<uint8_t> jpeg = sim::EncodeFrameJpeg(frames.back(), o.footage_jpeg_quality);
+      const cv::Mat decoded = cv::imdecode(jpeg, cv::IMREAD_COLOR);
+      frames.back().bgr.assign(decoded.data, decoded.data + decoded.total() * 3);
+    }
   }
   const double render_ms = std::chrono::duration<double, std::milli>(WallClock::now() - render_start).count() / n;
   const TriangleMesh mesh = scene::BuildStaticMesh(world, 2.0);
@@ -727,6 +736,9 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--variants", o->variants, "rows for the bus and 5-degree-bump scenario variants (need --seconds >= 7.2)")->capture_default_str();
   sub.add_option("--nees-csv", o->nees_csv, "write per-frame NEES diagnostics of every row (axes, sigmas) to this CSV")
       ->check(ave::cli::WritableFile());
+  sub.add_option("--footage-jpeg-quality", o->footage_jpeg_quality,
+                 "JPEG-encode and decode every frame at this quality first, as ave-sim footage delivers them (0: off)")
+      ->capture_default_str()->check(ave::cli::Range(0, 100));
   sub.add_option("--png", o->png, "plot to write (empty: none)")->capture_default_str()->check(ave::cli::WritableFile());
   return [o] { return RunPose(*o); };
 }
