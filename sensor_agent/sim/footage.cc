@@ -136,7 +136,8 @@ absl::StatusOr<FootageKey> MakeFootageKey(const std::string& scenario_name_or_pa
   key.fps = fps;
   key.start_s = start_s;
   key.jpeg_quality = jpeg_quality;
-  if (const EffectParams* jpeg = scenario->EffectsForCamera(camera_id).Find(EffectKind::kJpegArtefacts)) {
+  const auto effects = scenario->EffectsForCamera(camera_id);  // held: Find points into it
+  if (const EffectParams* jpeg = effects.Find(EffectKind::kJpegArtefacts)) {
     key.camera_jpeg = true;  // the same clamp as ApplyJpegArtefacts
     key.jpeg_quality = static_cast<int>(std::clamp(jpeg->Get("quality", 70.0), 1.0, 100.0));
   }
