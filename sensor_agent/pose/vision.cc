@@ -574,17 +574,18 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
     m.known.clear();
     const double acquiring_var =
         m.good_full_matches < m.options.lock_frames ? m.options.acquiring_sigma_px * m.options.acquiring_sigma_px : 0.0;
-    // Until the lock holds, every feature of the full matching shares the acquisition's association
-    // error (one persisting bias: each acquiring frame is matched from the pose the last one left).
-    const int64_t acquiring_bias_id =
-        m.good_full_matches < m.options.lock_frames && m.options.acquisition_association_px > 0 ? static_cast<int64_t>(m.map.points.size()) : -1;
+    // Until the lock holds, a point's match may be the wrong corner, and the same wrong one on the
+    // next acquiring frames (each is matched from the pose the last one pulled): a persisting
+    // association error per point (acquisition_association_px), ids after the shared one.
+    const bool acquiring_association = m.good_full_matches < m.options.lock_frames && m.options.acquisition_association_px > 0;
     for (const auto& [index, j] : matches) {
       const Eigen::Vector2d uv(corners[j].x, corners[j].y);
       stats.point_matches.emplace_back(m.map.points[index], uv);
       if (budget <= 0) continue;
       --budget;
       const UpdateResult r = ekf.UpdatePoint(m.k, m.map.points[index], uv, acquiring_var,
-                                             {{{m.BiasId(index), m.options.feature_point_bias_px}, acquiring_bias_id >= 0 ? PointBias{acquiring_bias_id, m.options.acquisition_association_px} : PointBias{m.SharedBiasId(), m.options.feature_shared_bias_px}}});
+                                             {{{m.BiasId(index), m.options.feature_point_bias_px}, acquiring_association ? PointBias{static_cast<int64_t>(m.map.points.size()) + 2 + index, m.options.acquisition_association_px}
+                                                                     : PointBias{m.SharedBiasId(), m.options.feature_shared_bias_px}}});
       Count(r, stats.points_used, stats);
       if (r.accepted()) m.known.push_back({index, frame_corners[j], frame_corners[j]});
     }

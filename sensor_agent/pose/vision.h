@@ -116,11 +116,14 @@ struct VisionOptions {
   // of frames in the NEES band, the orientation term alone at 0.2 px 87.4 %, both 87.7 %
   // (docs/BENCHMARKS.md, "NEES, session pose19e"). 0: none.
   double feature_point_bias_px = 0.2;
-  // The acquisition's shared association error (issue 19, session pose19e): until the lock holds
-  // (lock_frames), the full matchings start from the GPS + AHRS prior, several pixels off, and every
-  // feature of them shares the error of that association, frame after frame. It enters the
-  // reported covariance as one persisting pixel offset of this sigma on all of them (a consider
-  // bias, PoseEkf::UpdatePoint); the estimate is unchanged. 0: none.
+  // The acquisition's association errors (issue 19, session pose19e): until the lock holds
+  // (lock_frames), the full matchings start from the GPS + AHRS prior, several pixels off, and a
+  // point may be matched to the wrong corner, the same wrong one frame after frame (on the campus:
+  // 8 of frame 0's 13 matches 2.6-6.5 px off). Each point's match then carries a persisting pixel
+  // offset of this sigma in the reported covariance (a consider bias per point,
+  // PoseEkf::UpdatePoint), until updates after the lock shrink it; the estimate is unchanged.
+  // Off (0) by default: 1.5 px takes 2 of the 12 lock frames into the NEES band (87.7 -> 88.4 %),
+  // 3 px 5 of them but puts frames after the lock below it (88.0 %; docs/BENCHMARKS.md).
   double acquisition_association_px = 0;
   // A detection bias every known point shares (one 2D pixel offset for all of them, every frame),
   // beside the per-point one above: a consider bias of this sigma per axis. 0: none.

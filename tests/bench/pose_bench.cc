@@ -728,7 +728,7 @@ Runner AddPoseBench(CLI::App& sub) {
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 10.0));
   sub.add_option("--acquisition-association-px", o->acquisition_association_px,
-                 "sigma of the association error every feature shares until the lock holds, px (issue 19, pose19e; 0: off)")
+                 "sigma of each point's persisting association error until the lock holds, px (issue 19, pose19e; 0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 100.0));
   sub.add_option("--feature-shared-bias-px", o->feature_shared_bias_px,
