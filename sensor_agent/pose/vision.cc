@@ -583,9 +583,11 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
       stats.point_matches.emplace_back(m.map.points[index], uv);
       if (budget <= 0) continue;
       --budget;
-      const UpdateResult r = ekf.UpdatePoint(m.k, m.map.points[index], uv, acquiring_var,
-                                             {{{m.BiasId(index), m.options.feature_point_bias_px}, acquiring_association ? PointBias{static_cast<int64_t>(m.map.points.size()) + 2 + index, m.options.acquisition_association_px}
-                                                                     : PointBias{m.SharedBiasId(), m.options.feature_shared_bias_px}}});
+      const PointBias second = acquiring_association
+                                   ? PointBias{static_cast<int64_t>(m.map.points.size()) + 2 + index, m.options.acquisition_association_px}
+                                   : PointBias{m.SharedBiasId(), m.options.feature_shared_bias_px};
+      const UpdateResult r =
+          ekf.UpdatePoint(m.k, m.map.points[index], uv, acquiring_var, {{{m.BiasId(index), m.options.feature_point_bias_px}, second}});
       Count(r, stats.points_used, stats);
       if (r.accepted()) m.known.push_back({index, frame_corners[j], frame_corners[j]});
     }
