@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
@@ -12,6 +13,7 @@ namespace ave::pose {
 namespace {
 
 constexpr double kMinDepth_m = 0.1;
+constexpr size_t kMaxConsideredBiases = 256;  // per-feature biases whose sensitivities are kept (UpdatePoint's bias_id)
 
 bool AllFinite(const auto& m) { return m.allFinite(); }
 
@@ -42,6 +44,7 @@ std::string PoseFilterOptions::Check() const {
   if (!positive(orientation_sigma_deg)) return "orientation_sigma_deg must be finite and > 0";
   if (!(std::isfinite(orientation_correlation_s) && orientation_correlation_s >= 0)) return "orientation_correlation_s must be finite and >= 0";
   if (!(std::isfinite(gyro_correlation_s) && gyro_correlation_s >= 0)) return "gyro_correlation_s must be finite and >= 0";
+  if (!(std::isfinite(gps_correlation_s) && gps_correlation_s >= 0)) return "gps_correlation_s must be finite and >= 0";
   if (!positive(gyro_sigma_rad_s)) return "gyro_sigma_rad_s must be finite and > 0";
   if (!positive(gyro_bias_sigma_rad_s)) return "gyro_bias_sigma_rad_s must be finite and > 0";
   if (!(std::isfinite(gyro_bias_random_walk_rad_s_sqrt_s) && gyro_bias_random_walk_rad_s_sqrt_s >= 0)) {
@@ -81,6 +84,9 @@ void PoseEkf::Initialize(int64_t t_ns, const Rigid3d& world_from_camera, double 
   sigma << Eigen::Vector3d::Constant(position_sigma_m), Eigen::Vector3d::Constant(1.0),
       Eigen::Vector3d::Constant(orientation_sigma_rad), Eigen::Vector3d::Constant(0.5), Eigen::Vector3d::Constant(bias_sigma);
   P_ = sigma.cwiseAbs2().asDiagonal();
+  bias_ids_.clear();
+  bias_sigma_px_.clear();
+  bias_sensitivity_.resize(kErrorDim, 0);
   initialized_ = true;
 }
 
@@ -114,6 +120,7 @@ UpdateResult PoseEkf::Predict(int64_t t_ns) {
     }
     P_ = F * P_ * F.transpose() + Q;
     if (!landmark_ids_.empty()) cross_ = (F * cross_).eval();  // landmarks are static
+    PropagateBiases(F);
     Condition();
   }
   return {};
@@ -137,6 +144,7 @@ UpdateResult PoseEkf::Correct(const Eigen::Matrix<double, M, 1>& innovation, con
   }
   const StateMatrix I_KH = StateMatrix::Identity() - K * H;
   P_ = I_KH * P_ * I_KH.transpose() + K * R * K.transpose();  // Joseph form
+  CorrectBiases<M>(K, H);
   Inject(K * innovation);
   Condition();
   return {Rejection::kNone, d2};
@@ -154,6 +162,33 @@ void PoseEkf::Inject(const StateVector& dx) {
   G.block<3, 3>(kRot, kRot) -= 0.5 * Skew(dtheta);
   P_ = G * P_ * G.transpose();
   if (!landmark_ids_.empty()) cross_ = (G * cross_).eval();
+  PropagateBiases(G);
+}
+
+void PoseEkf::PropagateBiases(const StateMatrix& transition) {
+  if (bias_ids_.empty()) return;
+  bias_sensitivity_ = (transition * bias_sensitivity_).eval();
+}
+
+// The error after an update with gain K is (I - K H) e - K (noise + b_current): every bias's
+// sensitivity goes through (I - K H), and the bias this measurement carries adds -K.
+template <int M>
+void PoseEkf::CorrectBiases(const Eigen::Matrix<double, kErrorDim, M>& K, const Eigen::Matrix<double, M, kErrorDim>& H) {
+  if (bias_ids_.empty()) return;
+  bias_sensitivity_ -= K * (H * bias_sensitivity_);
+  if constexpr (M == 2) {
+    for (const int c : current_biases_)
+      if (c >= 0) bias_sensitivity_.middleCols<2>(2 * c) -= K;
+  }
+}
+
+StateMatrix PoseEkf::ConsideredBiasCovariance() const {
+  StateMatrix c = StateMatrix::Zero();
+  for (size_t i = 0; i < bias_ids_.size(); ++i) {
+    const auto g = bias_sensitivity_.middleCols<2>(2 * static_cast<Eigen::Index>(i));
+    c += bias_sigma_px_[i] * bias_sigma_px_[i] * g * g.transpose();
+  }
+  return c;
 }
 
 template <int M>
@@ -300,6 +335,7 @@ UpdateResult PoseEkf::UpdateLandmark(const PinholeIntrinsics& k, int64_t id, con
   const Eigen::Matrix<double, kErrorDim, 2> K = ldlt.solve(PHt.transpose()).transpose();
   const Eigen::Matrix<double, Eigen::Dynamic, 2> KL = ldlt.solve(LHt.transpose()).transpose();
   P_ -= K * S * K.transpose();
+  CorrectBiases<2>(K, Hp);  // the landmarks' own sensitivities are not kept (pose part only)
   CorrectLandmarks<2>(K, KL, S, innovation);
   Inject(K * innovation);
   Condition();
@@ -368,14 +404,49 @@ std::optional<Eigen::Vector2d> PoseEkf::ProjectPoint(const PinholeIntrinsics& k,
   return uv;
 }
 
+int PoseEkf::BiasIndex(int64_t id, double sigma_px) {
+  if (std::find(bias_ids_.begin(), bias_ids_.end(), id) == bias_ids_.end() && bias_ids_.size() >= kMaxConsideredBiases) {
+    // Full: forget the bias the error depends on least (the updates since have shrunk its sensitivity).
+    size_t weakest = 0;
+    double least = std::numeric_limits<double>::infinity();
+    for (size_t i = 0; i < bias_ids_.size(); ++i) {
+      const double c = bias_sigma_px_[i] * bias_sigma_px_[i] * bias_sensitivity_.middleCols<2>(2 * static_cast<Eigen::Index>(i)).squaredNorm();
+      if (c < least && std::find(current_biases_.begin(), current_biases_.end(), static_cast<int>(i)) == current_biases_.end()) least = c, weakest = i;
+    }
+    const Eigen::Index n = 2 * static_cast<Eigen::Index>(bias_ids_.size()), at = 2 * static_cast<Eigen::Index>(weakest);
+    bias_sensitivity_.middleCols(at, n - at - 2) = bias_sensitivity_.rightCols(n - at - 2).eval();
+    bias_sensitivity_.conservativeResize(Eigen::NoChange, n - 2);
+    bias_ids_.erase(bias_ids_.begin() + static_cast<std::ptrdiff_t>(weakest));
+    bias_sigma_px_.erase(bias_sigma_px_.begin() + static_cast<std::ptrdiff_t>(weakest));
+    for (int& c : current_biases_) c -= c > static_cast<int>(weakest);
+  }
+  const auto found = std::find(bias_ids_.begin(), bias_ids_.end(), id);
+  const int index = static_cast<int>(found - bias_ids_.begin());
+  if (found == bias_ids_.end()) {  // a new bias: the error does not depend on it yet
+    bias_ids_.push_back(id);
+    bias_sigma_px_.push_back(sigma_px);
+    bias_sensitivity_.conservativeResize(Eigen::NoChange, 2 * static_cast<Eigen::Index>(bias_ids_.size()));
+    bias_sensitivity_.rightCols<2>().setZero();
+  }
+  bias_sigma_px_[index] = sigma_px;
+  return index;
+}
+
 UpdateResult PoseEkf::UpdatePoint(const PinholeIntrinsics& k, const Eigen::Vector3d& point_in_world, const Eigen::Vector2d& uv,
-                                  double extra_variance_px2) {
+                                  double extra_variance_px2, std::array<PointBias, 2> biases) {
   if (!uv.allFinite() || !point_in_world.allFinite() || !std::isfinite(extra_variance_px2)) return {Rejection::kNotFinite, 0};
   Eigen::Matrix<double, 2, kErrorDim> H;
   const std::optional<Eigen::Vector2d> predicted = ProjectPoint(k, point_in_world, &H);
   if (!predicted) return {Rejection::kBehindCamera, 0};
   const double var = options_.pixel_sigma_px * options_.pixel_sigma_px + std::max(0.0, extra_variance_px2);
-  return Correct<2>(uv - *predicted, H, Eigen::Matrix2d::Identity() * var, options_.gate_chi2_2dof);
+  current_biases_ = {-1, -1};
+  for (size_t i = 0; i < biases.size(); ++i) {
+    const PointBias& b = biases[i];
+    if (b.id >= 0 && std::isfinite(b.sigma_px) && b.sigma_px > 0 && (i == 0 || b.id != biases[0].id)) current_biases_[i] = BiasIndex(b.id, b.sigma_px);
+  }
+  const UpdateResult r = Correct<2>(uv - *predicted, H, Eigen::Matrix2d::Identity() * var, options_.gate_chi2_2dof);
+  current_biases_ = {-1, -1};
+  return r;
 }
 
 std::optional<Eigen::Vector2d> PoseEkf::LineResidual(const PinholeIntrinsics& k, const Line3d& line, const Eigen::Vector2d& a,
@@ -416,6 +487,13 @@ Matrix6d PoseEkf::PoseCovariance() const {
   c.topRightCorner<3, 3>() = P_.block<3, 3>(kPos, kRot);
   c.bottomLeftCorner<3, 3>() = P_.block<3, 3>(kRot, kPos);
   c.bottomRightCorner<3, 3>() = P_.block<3, 3>(kRot, kRot) + considered_rot_;
+  if (!bias_ids_.empty()) {
+    const StateMatrix b = ConsideredBiasCovariance();
+    c.topLeftCorner<3, 3>() += b.block<3, 3>(kPos, kPos);
+    c.topRightCorner<3, 3>() += b.block<3, 3>(kPos, kRot);
+    c.bottomLeftCorner<3, 3>() += b.block<3, 3>(kRot, kPos);
+    c.bottomRightCorner<3, 3>() += b.block<3, 3>(kRot, kRot);
+  }
   return c;
 }
 

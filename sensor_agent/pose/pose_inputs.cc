@@ -162,6 +162,7 @@ void PoseTracker::Apply(const GpsReading& g) {
     ++stats_.time_rejected;
     return;
   }
+  const int64_t previous_ns = last_valid_gps_ns_;
   last_gps_ns_ = g.t_ns;
   if (!g.valid) {
     ++stats_.gps_dropouts;
@@ -173,6 +174,7 @@ void PoseTracker::Apply(const GpsReading& g) {
     const double sigma = std::sqrt(std::max(g.covariance.trace() / 3, ekf_.options().gps_min_sigma_m * ekf_.options().gps_min_sigma_m));
     ekf_.Initialize(g.t_ns, Rigid3d(first_orientation_->orientation, g.position_m), sigma,
                     ekf_.options().orientation_sigma_deg * 3.14159265358979323846 / 180);
+    last_valid_gps_ns_ = g.t_ns;
     ++stats_.gps_used;
     return;
   }
@@ -180,7 +182,15 @@ void PoseTracker::Apply(const GpsReading& g) {
     ++stats_.time_rejected;
     return;
   }
-  const UpdateResult r = ekf_.UpdatePosition(g.position_m, g.covariance);
+  // Correlated GPS error (multipath): a fix dt after the last counts as dt / correlation of an independent one.
+  const PoseFilterOptions& o = ekf_.options();
+  const double dt_s = previous_ns == INT64_MIN ? o.gps_correlation_s : static_cast<double>(g.t_ns - previous_ns) * 1e-9;
+  const double inflation = o.gps_correlation_s > dt_s ? o.gps_correlation_s / dt_s : 1.0;
+  Eigen::Matrix3d covariance = g.covariance;
+  const double floor = o.gps_min_sigma_m * o.gps_min_sigma_m;
+  for (int i = 0; i < 3; ++i) covariance(i, i) = std::max(covariance(i, i), floor);
+  const UpdateResult r = ekf_.UpdatePosition(g.position_m, inflation * covariance);
+  last_valid_gps_ns_ = g.t_ns;
   stats_.gps_used += r.accepted();
   stats_.gps_gated += r.rejection == Rejection::kGate;
   stats_.not_finite += r.rejection == Rejection::kNotFinite;

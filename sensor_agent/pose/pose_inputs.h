@@ -94,6 +94,7 @@ class PoseTracker {
   PoseEkf ekf_;
   size_t next_gps_ = 0, next_imu_ = 0;
   int64_t last_gps_ns_ = INT64_MIN, last_imu_ns_ = INT64_MIN;
+  int64_t last_valid_gps_ns_ = INT64_MIN;  // the last fix applied (PoseFilterOptions::gps_correlation_s)
   std::optional<GpsReading> first_fix_;
   std::optional<ImuReading> first_orientation_;
   TrackerStats stats_;

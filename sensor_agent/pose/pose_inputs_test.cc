@@ -97,6 +97,31 @@ TEST(PoseTracker, RejectsRepeatedAndBackwardsTimeStampsAndGatesA50MetreOutlier) 
   EXPECT_EQ(tracker.stats().time_rejected, 3);
 }
 
+// Issue 19, session pose19e: multipath is a slowly varying GPS offset, not white noise. A walker's
+// fixes all 1 m off to the east (a multipath offset near a building, reported as 5 cm) for 10 s:
+// taken as white, the fixes average the offset "away" and the filter ends confident of the wrong
+// position; weighted as correlated over 30 s (gps_correlation_s), its position sigma covers it.
+TEST(PoseTracker, CorrelatedGpsMultipathIsNotAveragedAwayByManyFixes) {
+  SensorLog log = WalkLog(10);
+  for (GpsReading& g : log.gps) g.position_m.x() += 1.0;
+  double z_white = 0, z_correlated = 0, sigma_correlated = 0;
+  for (const double correlation : {0.0, 30.0}) {
+    PoseFilterOptions o;
+    o.gps_correlation_s = correlation;
+    PoseTracker tracker(log, o);
+    const PoseSample s = tracker.Advance(10 * kSecond);
+    ASSERT_TRUE(s.valid);
+    const double error = s.world_from_camera.translation.x() - Walk(10).translation.x();
+    const double sigma = std::sqrt(s.covariance(0, 0));
+    (correlation > 0 ? z_correlated : z_white) = std::abs(error) / sigma;
+    if (correlation > 0) sigma_correlated = sigma;
+    EXPECT_NEAR(error, 1.0, 0.35) << correlation;  // nothing here can tell the offset from the position
+  }
+  EXPECT_GT(z_white, 3.0);        // overconfident (3.8 sigma)
+  EXPECT_LT(z_correlated, 2.0);   // covers the offset (0.5 sigma)
+  EXPECT_LT(sigma_correlated, 5.0);  // and still bounded
+}
+
 TEST(PoseTracker, NoPoseUntilTheFirstFixAndOrientation) {
   SensorLog log = WalkLog(2);
   log.gps.erase(log.gps.begin(), log.gps.begin() + 3);  // first fix at 0.6 s

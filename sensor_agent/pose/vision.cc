@@ -138,6 +138,10 @@ struct VisionTracker::Impl {
   int bad_full_matches = 0;   // ... and badly (lost_frames)
   int64_t next_track_id = 1;
   bool distorted = false;  // the frames show the lens distortion of the intrinsics
+  // The persisting-bias id of known point `index` (VisionOptions::feature_point_bias_px; -1: none).
+  int64_t BiasId(int index) const { return options.feature_point_bias_px > 0 ? index : -1; }
+  // The id of the bias every known point shares (VisionOptions::feature_shared_bias_px; -1: none).
+  int64_t SharedBiasId() const { return options.feature_shared_bias_px > 0 ? static_cast<int64_t>(map.points.size()) + 1 : -1; }
   cv::Matx33d K;
   cv::Mat distortion;
   // Visibility per static-model feature, computed lazily and reused while the camera stays within
@@ -471,7 +475,8 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
       stats.point_matches.emplace_back(p, known_uv[i]);
       if (budget <= 0) continue;
       --budget;
-      const UpdateResult r = ekf.UpdatePoint(m.k, p, known_uv[i], m.options.tracked_sigma_px * m.options.tracked_sigma_px);
+      const UpdateResult r = ekf.UpdatePoint(m.k, p, known_uv[i], m.options.tracked_sigma_px * m.options.tracked_sigma_px,
+                                             {{{m.BiasId(m.known[i].index), m.options.feature_point_bias_px}, {m.SharedBiasId(), m.options.feature_shared_bias_px}}});
       Count(r, stats.points_used, stats);
       if (r.accepted()) kept.push_back(m.known[i]);
     }
@@ -569,12 +574,20 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
     m.known.clear();
     const double acquiring_var =
         m.good_full_matches < m.options.lock_frames ? m.options.acquiring_sigma_px * m.options.acquiring_sigma_px : 0.0;
+    // Until the lock holds, a point's match may be the wrong corner, and the same wrong one on the
+    // next acquiring frames (each is matched from the pose the last one pulled): a persisting
+    // association error per point (acquisition_association_px), ids after the shared one.
+    const bool acquiring_association = m.good_full_matches < m.options.lock_frames && m.options.acquisition_association_px > 0;
     for (const auto& [index, j] : matches) {
       const Eigen::Vector2d uv(corners[j].x, corners[j].y);
       stats.point_matches.emplace_back(m.map.points[index], uv);
       if (budget <= 0) continue;
       --budget;
-      const UpdateResult r = ekf.UpdatePoint(m.k, m.map.points[index], uv, acquiring_var);
+      const PointBias second = acquiring_association
+                                   ? PointBias{static_cast<int64_t>(m.map.points.size()) + 2 + index, m.options.acquisition_association_px}
+                                   : PointBias{m.SharedBiasId(), m.options.feature_shared_bias_px};
+      const UpdateResult r =
+          ekf.UpdatePoint(m.k, m.map.points[index], uv, acquiring_var, {{{m.BiasId(index), m.options.feature_point_bias_px}, second}});
       Count(r, stats.points_used, stats);
       if (r.accepted()) m.known.push_back({index, frame_corners[j], frame_corners[j]});
     }

@@ -54,6 +54,8 @@ struct PoseBenchOptions {
   std::string png = "pose_bench.png";
   bool lines = true, new_points = true;
   double ahrs_correlation_s = 1.0;  // PoseFilterOptions::orientation_correlation_s
+  double gps_correlation_s = pose::PoseFilterOptions{}.gps_correlation_s;  // issue 19 (pose19e)
+  double gps_min_sigma_m = pose::PoseFilterOptions{}.gps_min_sigma_m;
   double gyro_correlation_s = pose::PoseFilterOptions{}.gyro_correlation_s;  // issue 19
   double acquiring_sigma_px = pose::VisionOptions{}.acquiring_sigma_px;  // issue 19
   double gyro_sigma_rad_s = pose::PoseFilterOptions{}.gyro_sigma_rad_s;
@@ -61,6 +63,9 @@ struct PoseBenchOptions {
   double acquisition_sigma_m = pose::VisionOptions{}.acquisition_position_sigma_m;  // issue 19
   double acquisition_sigma_deg = pose::VisionOptions{}.acquisition_orientation_sigma_deg;
   double feature_bias_px = pose::VisionOptions{}.feature_bias_px;
+  double feature_point_bias_px = pose::VisionOptions{}.feature_point_bias_px;  // issue 19 (pose19e)
+  double acquisition_association_px = pose::VisionOptions{}.acquisition_association_px;
+  double feature_shared_bias_px = pose::VisionOptions{}.feature_shared_bias_px;
   double gyro_bias_sigma_rad_s = pose::PoseFilterOptions{}.gyro_bias_sigma_rad_s;
   bool knobs = true;     // the front end's knobs at 50 features
   bool variants = true;  // the bus and bump scenario variants (need --seconds >= 7.2)
@@ -397,6 +402,8 @@ int RunPose(const PoseBenchOptions& o) {
     pose::PoseFilterOptions fo;
     fo.orientation_correlation_s = o.ahrs_correlation_s;
     fo.gyro_correlation_s = o.gyro_correlation_s;
+    fo.gps_correlation_s = o.gps_correlation_s;
+    fo.gps_min_sigma_m = o.gps_min_sigma_m;
     fo.gyro_sigma_rad_s = o.gyro_sigma_rad_s;
     fo.estimate_gyro_bias = o.gyro_bias;
     fo.gyro_bias_sigma_rad_s = o.gyro_bias_sigma_rad_s;
@@ -408,6 +415,9 @@ int RunPose(const PoseBenchOptions& o) {
     vo.acquisition_position_sigma_m = o.acquisition_sigma_m;
     vo.acquisition_orientation_sigma_deg = o.acquisition_sigma_deg;
     vo.feature_bias_px = o.feature_bias_px;
+    vo.feature_point_bias_px = o.feature_point_bias_px;
+    vo.acquisition_association_px = o.acquisition_association_px;
+    vo.feature_shared_bias_px = o.feature_shared_bias_px;
     vo.use_lines = o.lines;
     vo.use_new_points = o.new_points;
     if (run.tweak) run.tweak(vo);
@@ -719,14 +729,33 @@ Runner AddPoseBench(CLI::App& sub) {
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 100.0));
   sub.add_option("--feature-bias-px", o->feature_bias_px,
-                 "persisting detection bias of known features, px: floors the orientation covariance (issue 19; 0: off)")
+                 "persisting detection bias the known features share, px: the orientation term of the reported covariance (issue 19; 0: off)")
+      ->capture_default_str()
       ->check(CLI::Range(0.0, 10.0));
+  sub.add_option("--feature-point-bias-px", o->feature_point_bias_px,
+                 "persisting detection bias of each known point, px, its effect on the pose followed exactly (issue 19, pose19e; 0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 10.0));
+  sub.add_option("--acquisition-association-px", o->acquisition_association_px,
+                 "sigma of each point's persisting association error until the lock holds, px (issue 19, pose19e; 0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 100.0));
+  sub.add_option("--feature-shared-bias-px", o->feature_shared_bias_px,
+                 "sigma of a detection bias every known point shares, px (issue 19, pose19e; 0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 10.0));
   sub.add_option("--acquisition-sigma-deg", o->acquisition_sigma_deg, "orientation sigma added before the first vision frame (issue 19; 0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 90.0));
   sub.add_option("--gyro-correlation", o->gyro_correlation_s, "seconds over which gyro errors (bias) are correlated (0: white, before issue 19's NEES fix)")
       ->capture_default_str()
       ->check(ave::cli::Range(0, 1e6));
+  sub.add_option("--gps-correlation", o->gps_correlation_s, "seconds over which GPS errors (multipath) are correlated (0: white)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0, 1e6));
+  sub.add_option("--gps-min-sigma", o->gps_min_sigma_m, "floor of the GPS fixes' sigma, m (PoseFilterOptions::gps_min_sigma_m)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(1e-3, 100.0));
   sub.add_option("--ahrs-correlation", o->ahrs_correlation_s, "seconds over which AHRS errors are correlated (0: white, the issue-5 filter)")
       ->capture_default_str()
       ->check(ave::cli::Range(0, 1e6));
