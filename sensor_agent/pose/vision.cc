@@ -35,6 +35,7 @@ struct Track {
   int64_t id = 0;  // landmark id in the pose filter's state (joint mode)
   cv::Point2f key_px;    // where it was on the last keyframe (unknown_from_keyframe: KLT re-matches against it)
   bool has_key = false;  // seen on the last keyframe
+  Eigen::Vector2d first_bearing = Eigen::Vector2d::Zero();  // the anchored filter's (alpha, beta) at the first sighting (join_bearing_drift_px)
   double LargestSigma() const {
     return std::sqrt(std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(covariance, Eigen::EigenvaluesOnly).eigenvalues().maxCoeff()));
   }
@@ -84,6 +85,9 @@ std::string VisionOptions::Check() const {
   if (!(tracked_sigma_px >= 0)) return "tracked_sigma_px must be >= 0";
   if (!(landmark_sigma_px >= 0)) return "landmark_sigma_px must be >= 0";
   if (!(join_depth_sigma_scale > 0 && std::isfinite(join_depth_sigma_scale))) return "join_depth_sigma_scale must be finite and > 0";
+  if (!(new_point_depth_sigma_ratio >= 0 && std::isfinite(new_point_depth_sigma_ratio))) return "new_point_depth_sigma_ratio must be finite and >= 0";
+  if (!(join_bearing_drift_px >= 0 && std::isfinite(join_bearing_drift_px))) return "join_bearing_drift_px must be finite and >= 0";
+  if (!(join_model_depth_tolerance >= 0 && std::isfinite(join_model_depth_tolerance))) return "join_model_depth_tolerance must be finite and >= 0";
   if (!(weak_lock_gated_share >= 0 && weak_lock_gated_share <= 1)) return "weak_lock_gated_share must be in [0, 1]";
   if (!(lock_sigma_px > 0)) return "lock_sigma_px must be > 0";
   if (!(visibility_cache_m >= 0)) return "visibility_cache_m must be >= 0";
@@ -276,6 +280,34 @@ struct VisionTracker::Impl {
     return t.point.allFinite();
   }
 
+  // Why a converged unknown feature may not join the pose filter's state (issue 19, session pose19j),
+  // nullptr when it may. `depth` is its depth from the filter's pose (camera z).
+  // 1. Static-point test on its sightings so far: seen from its anchor camera, a static point's
+  //    bearing is fixed (only its depth is unknown), so the anchored filter's (alpha, beta) stays
+  //    where the first sighting put it; a track that slides (a corner formed by a tree or an
+  //    occluding edge in front of something farther, KLT creeping along an edge) or an object
+  //    moving across the epipolar lines drags it away. More than join_bearing_drift_px: refused.
+  // 2. Consistency with the static model: a point whose depth disagrees with the static mesh's
+  //    surface on the same ray by more than join_model_depth_tolerance (and 1 m) is in front of
+  //    every modelled surface (a person, a vehicle, the lens's occluder: a mover whose motion
+  //    along the epipolar lines the depth absorbed) or behind a surface that would hide it (a wrong
+  //    depth); a ray into the sky gives no depth to check, so it is refused too.
+  const char* JoinRefusal(const Track& t, const PoseEkf& ekf, double depth) const {
+    if (options.join_bearing_drift_px > 0) {
+      const Eigen::Vector2d b = t.structure.state.head<2>() - t.first_bearing;
+      if (std::hypot(b.x() * k.fx, b.y() * k.fy) > options.join_bearing_drift_px) return "bearing drifted";
+    }
+    if (options.join_model_depth_tolerance > 0) {
+      const Rigid3d pose = ekf.world_from_camera();
+      const Eigen::Vector3d ray = PixelRay(k, t.uv);
+      const std::optional<RayHit> hit = bvh.Raycast(pose.translation, (pose.rotation * ray).normalized(), 1e-3);
+      if (!hit) return "no model surface";
+      const double model_depth = hit->distance_m / ray.norm();
+      if (std::abs(depth - model_depth) > std::max(1.0, options.join_model_depth_tolerance * model_depth)) return "off the model";
+    }
+    return nullptr;
+  }
+
   Track NewTrack(const PoseEkf& ekf, const cv::Point2f& px, const Eigen::Vector2d& uv) {
     Track t;
     t.id = next_track_id++;
@@ -283,6 +315,7 @@ struct VisionTracker::Impl {
     t.uv = uv;
     t.structure = StartAnchoredPoint(ekf.world_from_camera(), k, uv, ekf.options().pixel_sigma_px, options.new_point_prior_depth_m,
                                      options.new_point_inverse_depth_sigma);
+    t.first_bearing = t.structure.state.head<2>();
     t.Sync();
     return t;
   }
@@ -659,7 +692,7 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
     if (m.options.joint_new_points) {  // converged features join the state while there is room
       for (const Track& t : m.tracks) {
         if (ekf.landmark_count() >= m.options.max_state_points) break;
-        if (ekf.HasLandmark(t.id) || t.observations < m.options.new_point_min_observations || t.LargestSigma() > m.options.new_point_sigma_m) continue;
+        if (ekf.HasLandmark(t.id) || t.observations < m.options.new_point_min_observations) continue;
         // The point is placed on this frame's ray from this frame's pose, at the depth the anchored
         // filter found, with the cross-covariances that placement implies (the issue-19 bug was
         // joining with none: the pose then re-learnt its own error from the point).
@@ -667,9 +700,20 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
         // anchor pose as exact and its sightings as independent, and is overconfident by about 2x.
         double depth = 0, depth_sigma = 0;
         if (!DepthFromPose(t.structure, ekf, depth, depth_sigma)) continue;
+        // Converged: every sigma below new_point_sigma_m, or (session pose19j) the depth known to a
+        // share of itself: far points, good references for the orientation, reach 0.3 m only after
+        // seconds, while an absolute test favours near points, and near is what a mover's image
+        // motion absorbed as depth looks like.
+        if (t.LargestSigma() > m.options.new_point_sigma_m &&
+            !(m.options.new_point_depth_sigma_ratio > 0 && depth_sigma <= m.options.new_point_depth_sigma_ratio * depth))
+          continue;
+        if (m.JoinRefusal(t, ekf, depth) != nullptr) {
+          ++stats.landmarks_refused;
+          continue;
+        }
         if (ekf.AddLandmarkOnRay(t.id, m.k, t.uv, depth, depth_sigma * m.options.join_depth_sigma_scale, ekf.options().pixel_sigma_px)) {
           const auto l = ekf.Landmark(t.id);
-          stats.landmarks_joined.push_back({l->first, l->second, t.uv});
+          stats.landmarks_joined.push_back({l->first, l->second, t.uv, Eigen::Vector2d(t.px.x, t.px.y), t.id, t.observations});
         }
       }
     }

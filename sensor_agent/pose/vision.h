@@ -52,7 +52,7 @@ struct VisionOptions {
   // then on estimated jointly with the pose, cross-covariances kept, up to max_state_points at a
   // time; their observations then correct the pose without the drift above (issue 19).
   bool joint_new_points = false;
-  int max_state_points = 15;
+  int max_state_points = 25;  // 15 until session pose19j (more landmarks pass its joining tests below)
   double landmark_sigma_px = 1.5;  // extra noise of a landmark's sighting (a KLT track: its error persists)
   // Unknown features seen on the last keyframe are re-matched by KLT against their keyframe patch
   // every frame (after the frame-to-frame step), so a track's error accumulates once per keyframe,
@@ -67,6 +67,19 @@ struct VisionOptions {
   bool unknown_after_lock = false;
   int max_new_points = 150;       // tracked unknown features kept
   double new_point_sigma_m = 0.3; // an unknown feature is used for pose once its largest sigma is below this
+  // ... or (joint mode, issue 19 session pose19j) once its depth sigma is below this share of its
+  // depth: a far point on a facade reaches 0.3 m only after seconds (190 sightings at 30 m) while
+  // its bearing is already a good orientation reference. 0: the absolute test alone.
+  double new_point_depth_sigma_ratio = 0.1;
+  // Joining tests (joint mode, session pose19j; docs/POSE.md "New features, session pose19j"): a
+  // converged feature is refused when, seen from its anchor camera, its bearing has drifted more than
+  // this from its first sighting (a static point's does not: a sliding track or a mover across the
+  // epipolar lines; 0: off) ...
+  double join_bearing_drift_px = 3;
+  // ... or its depth differs from the static mesh's surface on the same ray by more than this share
+  // of the mesh's depth (and 1 m), or the ray meets no surface (a mover along the epipolar lines
+  // whose motion became a wrong depth, or a point that the model says would be hidden; 0: off).
+  double join_model_depth_tolerance = 0.25;
   int new_point_min_observations = 5;  // ... and it has been seen this many times
   double new_point_prior_depth_m = 20;  // depth prior of a fresh unknown feature (anchored inverse depth 1/20 per m ...)
   double new_point_inverse_depth_sigma = 0.25;  // ... with this sigma (1/m): 2 sigma spans 1.8 m to infinity
@@ -181,9 +194,13 @@ struct VisionFrameStats {
     Eigen::Vector3d point;
     Eigen::Matrix3d covariance;
     Eigen::Vector2d uv;
+    Eigen::Vector2d px = Eigen::Vector2d::Zero();  // the same in the (distorted) frame
+    int64_t id = 0;                                // track id (unknown_tracks)
+    int observations = 0;                          // sightings before it joined
   };
   std::vector<JoinedLandmark> landmarks_joined;
   int unknown_dropped = 0;   // unknown features whose observation fell outside their gate
+  int landmarks_refused = 0;  // converged unknown features the joining tests kept out of the state (join_bearing_drift_px, join_model_depth_tolerance)
   // Every unknown-feature track after this frame: (track id, ideal pixel on this frame).
   std::vector<std::pair<int64_t, Eigen::Vector2d>> unknown_tracks;
   // The fine pass's known-point matches (model point, detected pixel), e.g. for a PnP peer.

@@ -19,6 +19,7 @@
 #include <iostream>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <Eigen/Core>
@@ -74,6 +75,7 @@ struct PoseBenchOptions {
   // > 0: every frame JPEG-encoded at this quality and decoded before the pose sees it, as the
   // agent's pre-rendered footage delivers frames (issue 19, session rate19); 0: the render as is.
   int footage_jpeg_quality = 0;
+  std::string landmark_csv;  // every unknown feature that joined the state, with what it sits on (issue 19, session pose19j)
 };
 
 struct Spread {
@@ -118,12 +120,45 @@ struct Row {
   std::vector<double> landmark_error_m, landmark_nees;
   int landmarks_joined = 0;
   double landmarks_in_state = 0;
+  std::array<int, 7> joined_on{};  // joined landmarks by what they sit on (LandmarkOn)
+  int64_t landmarks_refused = 0;   // converged features the joining tests refused (per feature and frame)
   double nees_sum = 0;
   std::vector<double> nees;  // per frame
   const Event* event = nullptr;
   std::vector<double> before_px, during_px, after_px;  // per-point errors in the event's windows
   double TotalMs() const { return (filter_ms + detect_ms + update_ms) / std::max(1, frames); }
 };
+
+// What an unknown feature at frame pixel `px` sits on, from the simulator's class mask: a mover or a
+// tree when any pixel of its 3x3 neighbourhood shows one (a corner lies on an outline; the lens's rolling occluder first), else the
+// centre pixel's class (issue 19, session pose19j).
+enum LandmarkOn : int { kOnBuilding = 0, kOnGround, kOnObject, kOnTree, kOnMover, kOnOccluder, kOnOther, kOnCount };
+static_assert(kOnCount == std::tuple_size<decltype(Row::joined_on)>::value);
+constexpr std::array<const char*, kOnCount> kOnNames = {"building", "ground", "static object", "tree", "person/vehicle", "lens occluder", "other"};
+int LandmarkOnClass(const sim::SimImage& im, const Eigen::Vector2d& px) {
+  const int u0 = static_cast<int>(std::lround(px.x())), v0 = static_cast<int>(std::lround(px.y()));
+  if (im.class_id.empty() || u0 < 0 || v0 < 0 || u0 >= im.width || v0 >= im.height) return kOnOther;
+  bool mover = false, tree = false, occluder = false;
+  for (int dv = -1; dv <= 1; ++dv)
+    for (int du = -1; du <= 1; ++du) {
+      const int u = std::clamp(u0 + du, 0, im.width - 1), v = std::clamp(v0 + dv, 0, im.height - 1);
+      const auto c = static_cast<sim::PixelClass>(im.class_id[im.Index(u, v)]);
+      mover |= c == sim::PixelClass::kPerson || c == sim::PixelClass::kVehicle;
+      tree |= c == sim::PixelClass::kVegetation;
+      occluder |= c == sim::PixelClass::kOccluder;
+    }
+  if (occluder) return kOnOccluder;
+  if (mover) return kOnMover;
+  if (tree) return kOnTree;
+  switch (static_cast<sim::PixelClass>(im.class_id[im.Index(u0, v0)])) {
+    case sim::PixelClass::kWall:
+    case sim::PixelClass::kRoof: return kOnBuilding;
+    case sim::PixelClass::kTerrain:
+    case sim::PixelClass::kRoad: return kOnGround;
+    case sim::PixelClass::kStaticObject: return kOnObject;
+    default: return kOnOther;
+  }
+}
 
 // NEES of the 6-dof pose (position m, world rotation vector rad) against its covariance; inside
 // the two-sided chi-square(6) 95 % band [1.237, 14.449].
@@ -322,6 +357,8 @@ int RunPose(const PoseBenchOptions& o) {
   };
   const Event bus{"bus", 3.0, 6.0}, bump{"bump", 5.0, 5.2};
   std::FILE* nees_csv = o.nees_csv.empty() ? nullptr : std::fopen(o.nees_csv.c_str(), "w");
+  std::FILE* landmark_csv = o.landmark_csv.empty() ? nullptr : std::fopen(o.landmark_csv.c_str(), "w");
+  if (landmark_csv) std::fprintf(landmark_csv, "row,t_s,id,on,observations,depth_m,true_depth_m,depth_sigma_m,u,v\n");
   if (nees_csv) {
     std::fprintf(nees_csv, "row,t_s,keyframe,nees,nees_pos,nees_rot,dx,sx,dy,sy,dz,sz,dpitch,spitch,dyaw,syaw,droll,sroll,median_px\n");
   }
@@ -372,6 +409,17 @@ int RunPose(const PoseBenchOptions& o) {
                         tweak(v);
                       }});
     };
+    // Session pose19j's joining tests, each taken back out, and all of them (the joint mode before it).
+    joint("as before session pose19j (0.3 m sigma only, 15 in the state, no joining tests)", "before_pose19j", [](pose::VisionOptions& v) {
+      v.new_point_depth_sigma_ratio = 0, v.max_state_points = 15, v.join_bearing_drift_px = 0, v.join_model_depth_tolerance = 0;
+    });
+    joint("no bearing-drift test", "no_bearing_test", [](pose::VisionOptions& v) { v.join_bearing_drift_px = 0; });
+    joint("no static-model depth test", "no_model_test", [](pose::VisionOptions& v) { v.join_model_depth_tolerance = 0; });
+    joint("no joining tests (relative depth sigma, 25 in the state)", "no_join_tests", [](pose::VisionOptions& v) {
+      v.join_bearing_drift_px = 0, v.join_model_depth_tolerance = 0;
+    });
+    joint("0.3 m sigma only (no relative depth criterion)", "absolute_sigma", [](pose::VisionOptions& v) { v.new_point_depth_sigma_ratio = 0; });
+    joint("15 in the state", "max_state_15", [](pose::VisionOptions& v) { v.max_state_points = 15; });
     joint("depth sigma not inflated at joining (before issue 19 part 3)", "depth_sigma_1", [](pose::VisionOptions& v) { v.join_depth_sigma_scale = 1; });
     joint("new tracks only while locked", "after_lock", [](pose::VisionOptions& v) { v.unknown_after_lock = true; });
     joint("joining at 0.5 m sigma (from 0.3)", "sigma_05", [](pose::VisionOptions& v) { v.new_point_sigma_m = 0.5; });
@@ -455,8 +503,20 @@ int RunPose(const PoseBenchOptions& o) {
         row.rejected_gate += s.rejected_gate, row.rejected_behind += s.rejected_behind, row.rejected_not_finite += s.rejected_not_finite;
         row.klt_lost += s.klt_lost, row.unknown_dropped += s.unknown_dropped;
         row.landmarks_in_state += s.landmarks_in_state;
+        row.landmarks_refused += s.landmarks_refused;
         for (const auto& l : s.landmarks_joined) {
           ++row.landmarks_joined;
+          const int on = LandmarkOnClass(*frame, l.px);
+          ++row.joined_on[on];
+          if (landmark_csv) {
+            const Eigen::Vector3d c = frame_truth.Inverse() * l.point;
+            const Eigen::Vector3d z_axis = frame_truth.rotation * Eigen::Vector3d::UnitZ();
+            const int u = std::clamp(static_cast<int>(std::lround(l.px.x())), 0, frame->width - 1);
+            const int v = std::clamp(static_cast<int>(std::lround(l.px.y())), 0, frame->height - 1);
+            const double true_depth = frame->depth_m.empty() ? -1.0 : frame->depth_m[frame->Index(u, v)];
+            std::fprintf(landmark_csv, "%s,%.4f,%lld,%s,%d,%.3f,%.3f,%.3f,%.1f,%.1f\n", run.key.c_str(), t_s, static_cast<long long>(l.id), kOnNames[on],
+                         l.observations, c.z(), true_depth, std::sqrt(z_axis.dot(l.covariance * z_axis)), l.px.x(), l.px.y());
+          }
           const Eigen::Vector3d ray = (frame_truth.rotation * PixelRay(k, l.uv)).normalized();
           const std::optional<RayHit> hit = bvh.Raycast(frame_truth.translation, ray);
           const Eigen::Vector3d c = frame_truth.Inverse() * l.point;
@@ -650,6 +710,18 @@ int RunPose(const PoseBenchOptions& o) {
                 100 * r.nees_below / f, 100 * r.nees_above / f, r.nees_sum / f, SpreadOf(r.nees).median, mk.median, mk.p95, mt.median, mt.p95, r.landmarks_in_state / std::max(1, r.frames), r.landmarks_joined,
                 r.landmark_error_m.size(), le.median, le.p95, lm_nees, r.landmark_nees.empty() ? 0.0 : 100.0 * lm_in / r.landmark_nees.size());
   }
+  std::printf("\nunknown features that joined the state, by what they sit on (the simulator's class mask at their pixel; a mover or a tree"
+              " anywhere in the 3x3 neighbourhood counts), and the joining tests' refusals (per feature and frame):\n| mode | refused | joined |");
+  for (const char* name : kOnNames) std::printf(" %s |", name);
+  std::printf("\n| --- | ---: | ---: |");
+  for (size_t i = 0; i < kOnNames.size(); ++i) std::printf(" ---: |");
+  std::printf("\n");
+  for (const Row& r : rows) {
+    if (r.landmarks_joined == 0) continue;
+    std::printf("| %s | %lld | %d |", RowName(r).c_str(), static_cast<long long>(r.landmarks_refused), r.landmarks_joined);
+    for (int c : r.joined_on) std::printf(" %d |", c);
+    std::printf("\n");
+  }
   std::printf("\nknown-point match residuals (observed - true projection, px, matches within 3 px): mean u, mean v (count)\n"
               "| mode | keyframes, wall feet | keyframes, eaves | tracked, wall feet | tracked, eaves |\n| --- | ---: | ---: | ---: | ---: |\n");
   for (const Row& r : rows) {
@@ -699,6 +771,7 @@ int RunPose(const PoseBenchOptions& o) {
                 k2.fx, p2, k2.fx, y2);
   json << buf << ",\"ekf_update_50_features_ms\":" << ekf50_ms << ",\"render_ms\":" << render_ms << ",\"png\":\"" << o.png << "\"}";
   if (nees_csv) std::fclose(nees_csv);
+  if (landmark_csv) std::fclose(landmark_csv);
   if (!o.png.empty()) Plot(rows, o.png, o.seconds);
   std::cout << json.str() << std::endl;
   return 0;
@@ -768,6 +841,8 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--footage-jpeg-quality", o->footage_jpeg_quality,
                  "JPEG-encode and decode every frame at this quality first, as ave-sim footage delivers them (0: off)")
       ->capture_default_str()->check(ave::cli::Range(0, 100));
+  sub.add_option("--landmark-csv", o->landmark_csv, "write every unknown feature that joins the state (joint rows), with what it sits on, to this CSV")
+      ->check(ave::cli::WritableFile());
   sub.add_option("--png", o->png, "plot to write (empty: none)")->capture_default_str()->check(ave::cli::WritableFile());
   return [o] { return RunPose(*o); };
 }
