@@ -6,6 +6,7 @@
 #include <fstream>
 #include <iterator>
 #include <sstream>
+#include <string_view>
 #include <thread>
 
 #include <unistd.h>
@@ -15,6 +16,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "model_store/common/le_bytes.h"
 #include "model_store/common/log.h"
 #include "model_store/scene/scene_file.h"
 #include "sensor_agent/sim/scenario.h"
@@ -27,17 +29,12 @@ constexpr size_t kEntryBytes = 8 + 4 + 8;
 // A key text longer than this is not ours (a corrupt length field must not allocate gigabytes).
 constexpr uint32_t kMaxKeyBytes = 1 << 16;
 
-template <typename T>
-void Put(std::string& out, T value) {
-  char raw[sizeof(T)];
-  std::memcpy(raw, &value, sizeof(T));
-  out.append(raw, sizeof(T));
-}
-
-template <typename T>
-T Get(const uint8_t* p) {
-  T value;
-  std::memcpy(&value, p, sizeof(T));
+// A little-endian number at p (the caller has checked that it lies inside the file).
+template <typename U>
+U GetAt(const uint8_t* p) {
+  bytes::LeReader reader(std::string_view(reinterpret_cast<const char*>(p), sizeof(U)));
+  U value = 0;
+  reader.Get(value);
   return value;
 }
 
@@ -167,7 +164,7 @@ absl::StatusOr<Footage> Footage::Open(const std::string& path, const FootageKey&
     return corrupt("not an AVEFOOT1 file (bad magic or shorter than its header)");
   }
   size_t at = sizeof(kMagic);
-  const uint32_t key_bytes = Get<uint32_t>(b.data() + at);
+  const uint32_t key_bytes = GetAt<uint32_t>(b.data() + at);
   at += 4;
   if (key_bytes > kMaxKeyBytes || b.size() < at + key_bytes + 8) return corrupt("truncated in its key");
   absl::StatusOr<FootageKey> key = ParseKeyText(std::string(b.begin() + at, b.begin() + at + key_bytes), path);
@@ -177,13 +174,13 @@ absl::StatusOr<Footage> Footage::Open(const std::string& path, const FootageKey&
     return absl::FailedPreconditionError(absl::StrCat(path, ": stale footage: ", why));
   }
   footage.key_ = *key;
-  const uint64_t frames = Get<uint64_t>(b.data() + at);
+  const uint64_t frames = GetAt<uint64_t>(b.data() + at);
   at += 8;
   if (frames == 0 || frames > (b.size() - at) / kEntryBytes) return corrupt(absl::StrCat("index of ", frames, " frames does not fit the file"));
   uint64_t expected_offset = at + frames * kEntryBytes;
   for (uint64_t k = 0; k < frames; ++k, at += kEntryBytes) {
-    Entry e{Get<uint64_t>(b.data() + at), Get<uint32_t>(b.data() + at + 8)};
-    const uint64_t hash = Get<uint64_t>(b.data() + at + 12);
+    Entry e{GetAt<uint64_t>(b.data() + at), GetAt<uint32_t>(b.data() + at + 8)};
+    const uint64_t hash = GetAt<uint64_t>(b.data() + at + 12);
     if (e.offset != expected_offset || e.size == 0 || e.offset + e.size > b.size()) {
       return corrupt(absl::StrCat("frame ", k, " lies outside the file (truncated?)"));
     }
@@ -259,14 +256,14 @@ absl::Status WriteFootage(const std::string& path, const FootageKey& key, const 
     if (!f.ok()) return f;
   std::string head(kMagic, sizeof(kMagic));
   const std::string key_text = key.Text();
-  Put<uint32_t>(head, static_cast<uint32_t>(key_text.size()));
+  bytes::PutLe<uint32_t>(head, static_cast<uint32_t>(key_text.size()));
   head += key_text;
-  Put<uint64_t>(head, static_cast<uint64_t>(frames));
+  bytes::PutLe<uint64_t>(head, static_cast<uint64_t>(frames));
   uint64_t offset = head.size() + static_cast<uint64_t>(frames) * kEntryBytes;
   for (const std::vector<uint8_t>& j : jpegs) {
-    Put<uint64_t>(head, offset);
-    Put<uint32_t>(head, static_cast<uint32_t>(j.size()));
-    Put<uint64_t>(head, Fnv1a64(j.data(), j.size()));
+    bytes::PutLe<uint64_t>(head, offset);
+    bytes::PutLe<uint32_t>(head, static_cast<uint32_t>(j.size()));
+    bytes::PutLe<uint64_t>(head, Fnv1a64(j.data(), j.size()));
     offset += j.size();
   }
   const std::filesystem::path target(path);
