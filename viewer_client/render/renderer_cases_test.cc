@@ -253,6 +253,45 @@ TEST_F(SceneTest, Depth_IsLinearMetresAndWritesExr) {
   EXPECT_FALSE(WriteDepthExr(path, *depth, kWidth + 1, kHeight).ok());
 }
 
+// The headless display is Mesa's surfaceless platform or an EGL device (a GPU server without
+// Mesa), as AVE_EGL_PLATFORM says: both draw the test scene alike here (Mesa offers both, llvmpipe
+// behind each), and a value that is neither is refused naming the variable.
+TEST(HeadlessContextTest, EglPlatformFromTheEnvironmentDrawsTheSameScene) {
+  struct Restore {
+    ~Restore() { ::unsetenv("AVE_EGL_PLATFORM"); }
+  } restore;
+  ::setenv("AVE_EGL_PLATFORM", "gbm", 1);
+  absl::StatusOr<std::unique_ptr<HeadlessContext>> refused = CreateHeadlessContext(kWidth, kHeight);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(refused.status().message().find("AVE_EGL_PLATFORM='gbm'"), std::string_view::npos) << refused.status();
+
+  std::vector<std::vector<uint8_t>> pictures;
+  for (const char* platform : {"surfaceless", "device"}) {
+    ::setenv("AVE_EGL_PLATFORM", platform, 1);
+    absl::StatusOr<std::unique_ptr<HeadlessContext>> context = CreateHeadlessContext(kWidth, kHeight);
+    ASSERT_TRUE(context.ok()) << platform << ": " << context.status();
+    std::printf("%s: %s\n", platform, (*context)->Description().c_str());
+    absl::StatusOr<std::unique_ptr<Renderer>> renderer = Renderer::Create({});
+    ASSERT_TRUE(renderer.ok()) << platform << ": " << renderer.status();
+    ASSERT_TRUE((*renderer)->SetStaticMesh(GroundAndBox()).ok());
+    ASSERT_TRUE((*renderer)->SetProjectors({MakeProjector(ProjectorCamera(), QuadrantImage(640, 480), 1)}).ok());
+    (*context)->BindFramebuffer();
+    ASSERT_TRUE((*renderer)->Render({MakeView(ViewerCamera(), {0, 0, kWidth, kHeight})}, kWidth, kHeight).ok()) << platform;
+    absl::StatusOr<std::vector<uint8_t>> pixels = (*context)->ReadPixels();
+    ASSERT_TRUE(pixels.ok()) << platform << ": " << pixels.status();
+    pictures.push_back(*pixels);
+    renderer->reset();  // before its context goes
+  }
+  ASSERT_EQ(pictures[0].size(), pictures[1].size());
+  size_t differ = 0;
+  for (size_t k = 0; k < pictures[0].size(); ++k) differ += std::abs(int(pictures[0][k]) - int(pictures[1][k])) > 3;
+  EXPECT_LE(differ, pictures[0].size() / 1000) << "surfaceless and device pictures differ";
+  size_t lit = 0;
+  for (uint8_t v : pictures[1]) lit += v > 0;
+  EXPECT_GT(lit, pictures[1].size() / 4) << "the device platform drew the scene";
+}
+
 // ---------------------------------------------------------------------------------------------
 }  // namespace
 }  // namespace ave::viewer
