@@ -9,7 +9,7 @@ PACKAGES=(
   # wire: gRPC + Protobuf
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   # vision, math, point clouds
-  libopencv-dev libeigen3-dev libpcl-dev
+  libopencv-dev libopencv-contrib-dev libeigen3-dev libpcl-dev
   # rendering: GLFW window, headless EGL (Mesa llvmpipe), GL loader, math
   libglfw3-dev libglm-dev libepoxy-dev libegl-dev libgl-dev libgl1-mesa-dri libegl-mesa0 xvfb xauth
   # window input in the tests: synthetic keyboard and mouse events on the virtual display

@@ -38,11 +38,18 @@ struct FeatureMap {
 // its eaves edges (round parts contribute none).
 FeatureMap CampusFeatureMap(const scene::SyntheticCampus& campus);
 
+// The line segment detector of keyframes: OpenCV's LSD (Grompone von Gioi et al.) or the Fast Line
+// Detector of opencv_contrib's ximgproc (Lee et al. 2014: Canny, then straight runs of edge pixels).
+enum class SegmentDetector : uint8_t { kLsd, kFastLine };
+
 struct VisionOptions {
   int max_features = 50;          // features used per frame (known points, then lines, then new points)
   double search_radius_px = 60;   // window around each prediction for the first (coarse) match
   double match_radius_px = 3;     // window after the coarse pass
   bool use_lines = true;
+  // Issue 19 (moonshot): the Fast Line Detector, its matched segments refined to sub-pixel, costs a
+  // sixth of LSD (0.29 against 1.96 ms a frame) at the same accuracy (docs/BENCHMARKS.md, "Fast Line Detector").
+  SegmentDetector segment_detector = SegmentDetector::kFastLine;
   bool use_new_points = true;     // track a priori unknown features and estimate their 3D structure
   // Let converged unknown features correct the pose too. Off by default: without the pose-point
   // cross-correlations (not kept here) their errors feed back into the pose, which then drifts
@@ -160,7 +167,7 @@ struct VisionOptions {
 enum VisionStage : int {
   kStageGray = 0,      // BGR -> grey
   kStageCorners,       // Shi-Tomasi corners + sub-pixel refinement (+ undistortion)
-  kStageSegments,      // LSD line segments
+  kStageSegments,      // line segments (SegmentDetector) and the refinement of the matched ones
   kStageEdges,         // Canny + edge and skyline distance transforms
   kStageChamfer,       // coarse alignment search (chamfer + skyline)
   kStageKlt,           // pyramid + pyramidal Lucas-Kanade of known and unknown tracks

@@ -66,6 +66,7 @@ struct PoseBenchOptions {
   double feature_bias_px = pose::VisionOptions{}.feature_bias_px;
   double feature_point_bias_px = pose::VisionOptions{}.feature_point_bias_px;  // issue 19 (pose19e)
   double acquisition_association_px = pose::VisionOptions{}.acquisition_association_px;
+  std::string segments = pose::VisionOptions{}.segment_detector == pose::SegmentDetector::kLsd ? "lsd" : "fld";  // issue 19
   double feature_shared_bias_px = pose::VisionOptions{}.feature_shared_bias_px;
   double gyro_bias_sigma_rad_s = pose::PoseFilterOptions{}.gyro_bias_sigma_rad_s;
   bool knobs = true;     // the front end's knobs at 50 features
@@ -465,6 +466,7 @@ int RunPose(const PoseBenchOptions& o) {
     vo.feature_bias_px = o.feature_bias_px;
     vo.feature_point_bias_px = o.feature_point_bias_px;
     vo.acquisition_association_px = o.acquisition_association_px;
+    vo.segment_detector = o.segments == "fld" ? pose::SegmentDetector::kFastLine : pose::SegmentDetector::kLsd;
     vo.feature_shared_bias_px = o.feature_shared_bias_px;
     vo.use_lines = o.lines;
     vo.use_new_points = o.new_points;
@@ -809,6 +811,9 @@ Runner AddPoseBench(CLI::App& sub) {
                  "persisting detection bias of each known point, px, its effect on the pose followed exactly (issue 19, pose19e; 0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 10.0));
+  sub.add_option("--segments", o->segments, "keyframe line segment detector: lsd (OpenCV's LSD) or fld (ximgproc's Fast Line Detector)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"lsd", "fld"}));
   sub.add_option("--acquisition-association-px", o->acquisition_association_px,
                  "sigma of each point's persisting association error until the lock holds, px (issue 19, pose19e; 0: off)")
       ->capture_default_str()
