@@ -84,6 +84,7 @@ void PoseEkf::Initialize(int64_t t_ns, const Rigid3d& world_from_camera, double 
   sigma << Eigen::Vector3d::Constant(position_sigma_m), Eigen::Vector3d::Constant(1.0),
       Eigen::Vector3d::Constant(orientation_sigma_rad), Eigen::Vector3d::Constant(0.5), Eigen::Vector3d::Constant(bias_sigma);
   P_ = sigma.cwiseAbs2().asDiagonal();
+  reported_scale_ = 1;
   bias_ids_.clear();
   bias_sigma_px_.clear();
   bias_sensitivity_.resize(kErrorDim, 0);
@@ -494,7 +495,7 @@ Matrix6d PoseEkf::PoseCovariance() const {
     c.bottomLeftCorner<3, 3>() += b.block<3, 3>(kRot, kPos);
     c.bottomRightCorner<3, 3>() += b.block<3, 3>(kRot, kRot);
   }
-  return c;
+  return reported_scale_ * c;
 }
 
 }  // namespace ave::pose

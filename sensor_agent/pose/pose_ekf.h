@@ -16,6 +16,7 @@
 // AHRS orientation, gyro rate (R' w + b + noise), and vision pixels (point features) and line
 // distances (line features), each Mahalanobis-gated with a reason; updates in Joseph form; covariance symmetrised and its diagonal floored.
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -162,6 +163,14 @@ class PoseEkf {
   // estimate (a Schmidt "consider" term for a bias the state cannot observe). The caller (vision)
   // sets it per frame; zero by default. Ignored unless finite, symmetric, positive semi-definite.
   void SetConsideredOrientation(const Eigen::Matrix3d& covariance);
+  // Scale of the *reported* PoseCovariance() (>= 1; 1 by default): the caller's evidence that the
+  // filter's own covariance is too small for now (VisionOptions::nis_short_gain: the recent
+  // innovations are larger than usual). Gains, gates and the estimate are unchanged. Ignored unless
+  // finite and >= 1.
+  void SetReportedScale(double scale) {
+    if (std::isfinite(scale) && scale >= 1) reported_scale_ = scale;
+  }
+  double reported_scale() const { return reported_scale_; }
   // The error state's covariance due to the per-feature biases of UpdatePoint (bias_id >= 0):
   // sum_id sigma_id^2 G_id G_id' (15 x 15; zero when none). Already included in PoseCovariance().
   StateMatrix ConsideredBiasCovariance() const;
@@ -236,6 +245,7 @@ class PoseEkf {
   Eigen::VectorXd landmarks_;
   Eigen::MatrixXd cross_, landmark_cov_;
   Eigen::Matrix3d considered_rot_ = Eigen::Matrix3d::Zero();  // SetConsideredOrientation
+  double reported_scale_ = 1;  // SetReportedScale
   // Per-feature persisting biases (UpdatePoint's bias_id): ids, their sigmas (px) and the error
   // state's sensitivity to each, two columns per bias (u, v); empty unless used. The landmarks'
   // own sensitivities are not kept (joint mode: the pose part only, an approximation).

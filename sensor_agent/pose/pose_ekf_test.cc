@@ -1,6 +1,7 @@
 #include "sensor_agent/pose/pose_ekf.h"
 
 #include <cmath>
+#include <limits>
 #include <random>
 
 #include <gmock/gmock.h>
@@ -324,6 +325,22 @@ TEST(PoseEkf, AMillionUpdatesKeepTheCovarianceSpdAndTheQuaternionUnit) {
   EXPECT_NEAR(ekf.world_from_camera().rotation.norm(), 1.0, 1e-12);
   EXPECT_LT(ekf.world_from_camera().translation.norm(), 0.05);
   EXPECT_GT(ekf.covariance().diagonal().minCoeff(), 0);
+}
+
+TEST(PoseEkf, TheReportedScaleMultipliesOnlyTheReportedCovariance) {
+  PoseEkf ekf = Filter(Rigid3d(), 0.2, 1 * kDeg);
+  const Matrix6d before = ekf.PoseCovariance();
+  const StateMatrix own = ekf.covariance();
+  ekf.SetReportedScale(2.5);
+  EXPECT_TRUE(ekf.PoseCovariance().isApprox(2.5 * before, 1e-12));
+  EXPECT_EQ(ekf.covariance(), own);
+  for (double bad : {0.5, -1.0, std::nan(""), std::numeric_limits<double>::infinity()}) {
+    ekf.SetReportedScale(bad);
+    EXPECT_EQ(ekf.reported_scale(), 2.5) << bad;
+  }
+  ekf.Initialize(0, Rigid3d(), 0.2, 1 * kDeg);
+  EXPECT_EQ(ekf.reported_scale(), 1.0);
+  EXPECT_TRUE(ekf.PoseCovariance().isApprox(before, 1e-12));
 }
 
 TEST(PoseFilterOptions, CheckNamesTheBadField) {

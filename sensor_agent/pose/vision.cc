@@ -92,6 +92,10 @@ std::string VisionOptions::Check() const {
   if (!(weak_lock_gated_share >= 0 && weak_lock_gated_share <= 1)) return "weak_lock_gated_share must be in [0, 1]";
   if (!(lock_sigma_px > 0)) return "lock_sigma_px must be > 0";
   if (!(visibility_cache_m >= 0)) return "visibility_cache_m must be >= 0";
+  if (!(nis_short_gain >= 0 && nis_short_gain <= 1 && nis_long_gain > 0 && nis_long_gain <= 1)) {
+    return "nis_short_gain must be in [0, 1] and nis_long_gain in (0, 1]";
+  }
+  if (!(nis_scale_cap >= 1 && std::isfinite(nis_scale_cap))) return "nis_scale_cap must be finite and >= 1";
   if (klt_window_px < 5 || klt_levels < 0 || klt_levels > 6) return "klt_window_px must be >= 5 and klt_levels in [0, 6]";
   if (grid_cell_px < 8 || grid_min_tracks < 1) return "grid_cell_px must be >= 8 and grid_min_tracks >= 1";
   if (detect_level < 0 || detect_level > 3) return "detect_level must be in [0, 3]";
@@ -142,6 +146,7 @@ struct VisionTracker::Impl {
   int good_full_matches = 0;  // consecutive full matchings that fitted well (lock_frames)
   int bad_full_matches = 0;   // ... and badly (lost_frames)
   int64_t next_track_id = 1;
+  double nis_short = -1, nis_long = -1;  // running means of the frames' NIS (VisionOptions::nis_short_gain; -1: none yet)
   cv::Ptr<cv::ximgproc::FastLineDetector> fast_lines;  // SegmentDetector::kFastLine, made on first use
   bool distorted = false;  // the frames show the lens distortion of the intrinsics
   // The persisting-bias id of known point `index` (VisionOptions::feature_point_bias_px; -1: none).
@@ -369,6 +374,7 @@ namespace {
 void Count(const UpdateResult& r, int& used, VisionFrameStats& stats) {
   if (r.accepted()) {
     ++used;
+    stats.nis = (stats.nis < 0 ? 0.0 : stats.nis) + r.mahalanobis_sq;  // a sum until the frame ends
     return;
   }
   ++stats.rejected;
@@ -786,6 +792,13 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
     for (Track& t : m.tracks) t.key_px = t.px, t.has_key = true;
   }
   m.previous_pyramid = std::move(pyramid);
+  if (stats.nis >= 0) stats.nis /= std::max(1, stats.features_used());
+  if (m.options.nis_short_gain > 0 && stats.nis >= 0) {
+    m.nis_short = m.nis_short < 0 ? stats.nis : m.nis_short + m.options.nis_short_gain * (stats.nis - m.nis_short);
+    m.nis_long = m.nis_long < 0 ? stats.nis : m.nis_long + m.options.nis_long_gain * (stats.nis - m.nis_long);
+    ekf.SetReportedScale(m.nis_long > 0 ? std::clamp(m.nis_short / m.nis_long, 1.0, m.options.nis_scale_cap) : 1.0);
+  }
+  stats.reported_scale = ekf.reported_scale();
   if (m.options.feature_bias_px > 0 && stats.points_used + stats.lines_used > 0) {
     double r2 = 0;
     for (const auto& pm : stats.point_matches) r2 += (pm.second - Eigen::Vector2d(m.k.cx, m.k.cy)).squaredNorm();

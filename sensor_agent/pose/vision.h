@@ -148,6 +148,16 @@ struct VisionOptions {
   // A detection bias every known point shares (one 2D pixel offset for all of them, every frame),
   // beside the per-point one above: a consider bias of this sigma per axis. 0: none.
   double feature_shared_bias_px = 0;
+  // Issue 19: the reported covariance follows the innovations (covariance matching, Mehra 1972).
+  // A persisting error (a feature found off its model point, an association) keeps each
+  // innovation small, since the pose has moved to agree with it, but when the features in view
+  // change or the camera turns, the innovations grow before the error shows. Each frame's mean
+  // normalised innovation squared (NIS) of the applied features enters a short running mean (this
+  // gain) and a long one (nis_long_gain); the reported pose covariance is scaled by short / long,
+  // between 1 and nis_scale_cap (PoseEkf::SetReportedScale). The estimate is unchanged. 0: off.
+  double nis_short_gain = 0.5;
+  double nis_long_gain = 0.01;
+  double nis_scale_cap = 3.0;
   int min_tracked_known = 8;      // fewer tracked known features than this: full matching now (weak lock)
   double weak_lock_gated_share = 0.25;
   double lock_sigma_px = 1.0;     // the pose's projected uncertainty at the tracked features above this (px, mean): full matching now  // more than this share of tracked known features outside the gate: full matching now
@@ -189,6 +199,8 @@ struct VisionFrameStats {
   double update_ms = 0;      // EKF updates (both passes) and unknown-feature filters
   std::array<double, kVisionStageCount> stage_ms{};  // thread CPU ms per stage (detect_ms + update_ms in wall time)
   bool keyframe = false;     // full model matching ran on this frame
+  double nis = -1;           // mean normalised innovation squared of the features applied (-1: none)
+  double reported_scale = 1;  // the reported covariance's scale after this frame (VisionOptions::nis_short_gain)
   bool weak_lock = false;    // ... because the tracked known features disagreed with the prediction
   int relocks = 0;           // the pose was declared lost (lost_frames) and its covariance inflated
   int known_tracked = 0;     // known features followed by KLT into this frame

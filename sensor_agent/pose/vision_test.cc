@@ -250,6 +250,52 @@ TEST_F(VisionTest, UnknownFeaturesReMatchedOnTheKeyframeDriftLessThanChainedFram
   EXPECT_LT(keyed, 0.8 * chained) << "keyframe-matched " << keyed << " px (" << keyed_n << " sightings), chained " << chained << " px (" << chained_n << ")";
 }
 
+// Issue 19: innovations larger than the run's usual (here: tracked frames whose halves move apart by
+// 6 px, which no pose explains)
+// scale the reported covariance up; the filter's own covariance is untouched, and steady frames
+// bring the scale back to 1.
+TEST_F(VisionTest, LargerInnovationsThanUsualScaleTheReportedCovariance) {
+  const scene::CameraSpec& camera = *scenario_->world.FindCamera("backpack");
+  const PinholeIntrinsics& k = camera.intrinsics;
+  const sim::SimulatedCamera sim_camera(scenario_->world, camera, scenario_->EffectsForCamera("backpack"), scenario_->seed);
+  VisionOptions options;
+  options.lock_frames = 3;
+  options.lock_sigma_px = 4;
+  VisionTracker vision(CampusFeatureMap(scenario_->world), scene::BuildStaticMesh(scenario_->world, 2.0), k, options);
+  PoseEkf ekf;
+  const int first = 120;
+  ekf.Initialize(static_cast<int64_t>(std::llround(first * 1e9 / 30)), sim_camera.PoseAt(first / 30.0), 0.3, 0.5 * kDeg);
+  std::vector<double> nis, scale;
+  for (int f = first; f < first + 34; ++f) {
+    sim::SimImage frame = sim_camera.Frame(f, f / 30.0);
+    if (f >= first + 25 && f < first + 28) {  // three frames between keyframes: the left half 3 px down, the right half 3 px up
+      cv::Mat view(frame.height, frame.width, CV_8UC3, frame.bgr.data()), down, up;
+      cv::warpAffine(view, down, cv::Matx23d(1, 0, 0, 0, 1, 3), view.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+      cv::warpAffine(view, up, cv::Matx23d(1, 0, 0, 0, 1, -3), view.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+      down(cv::Rect(0, 0, frame.width / 2, frame.height)).copyTo(view(cv::Rect(0, 0, frame.width / 2, frame.height)));
+      up(cv::Rect(frame.width / 2, 0, frame.width - frame.width / 2, frame.height)).copyTo(view(cv::Rect(frame.width / 2, 0, frame.width - frame.width / 2, frame.height)));
+    }
+    ekf.Predict(static_cast<int64_t>(std::llround(f * 1e9 / 30)));
+    const VisionFrameStats s = vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
+    ASSERT_GE(s.nis, 0) << f;
+    nis.push_back(s.nis);
+    scale.push_back(s.reported_scale);
+    EXPECT_EQ(s.reported_scale, ekf.reported_scale());
+    const Matrix6d own = [&] {
+      Matrix6d c;
+      c << ekf.covariance().block<3, 3>(kPos, kPos), ekf.covariance().block<3, 3>(kPos, kRot), ekf.covariance().block<3, 3>(kRot, kPos),
+          ekf.covariance().block<3, 3>(kRot, kRot);
+      return c;
+    }();
+    EXPECT_GE(ekf.PoseCovariance()(0, 0), s.reported_scale * own(0, 0) * (1 - 1e-12)) << f;
+  }
+  const double steady_nis = *std::max_element(nis.begin() + 10, nis.begin() + 25);
+  EXPECT_GT(nis[25], 2 * steady_nis) << "the shifted frame's innovations";
+  EXPECT_EQ(*std::max_element(scale.begin() + 10, scale.begin() + 25), 1.0) << "no scale while the frames agree";
+  EXPECT_GT(*std::max_element(scale.begin() + 25, scale.begin() + 29), 1.5);
+  EXPECT_EQ(*std::min_element(scale.begin() + 29, scale.begin() + 34), 1.0) << "back to the filter's own covariance";
+}
+
 TEST(VisionOptions, CheckNamesTheBadField) {
   VisionOptions o;
   EXPECT_EQ(o.Check(), "");
@@ -273,6 +319,12 @@ TEST(VisionOptions, CheckNamesTheBadField) {
   o = VisionOptions();
   o.join_depth_sigma_scale = 0;
   EXPECT_THAT(o.Check(), ::testing::HasSubstr("join_depth_sigma_scale"));
+  o = VisionOptions();
+  o.nis_long_gain = 0;
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("nis_long_gain"));
+  o = VisionOptions();
+  o.nis_scale_cap = 0.5;
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("nis_scale_cap"));
 }
 
 }  // namespace

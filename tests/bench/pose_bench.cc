@@ -66,6 +66,7 @@ struct PoseBenchOptions {
   double feature_bias_px = pose::VisionOptions{}.feature_bias_px;
   double feature_point_bias_px = pose::VisionOptions{}.feature_point_bias_px;  // issue 19 (pose19e)
   double acquisition_association_px = pose::VisionOptions{}.acquisition_association_px;
+  double nis_short_gain = pose::VisionOptions{}.nis_short_gain;  // issue 19: reported covariance follows the innovations
   std::string segments = pose::VisionOptions{}.segment_detector == pose::SegmentDetector::kLsd ? "lsd" : "fld";  // issue 19
   double feature_shared_bias_px = pose::VisionOptions{}.feature_shared_bias_px;
   double gyro_bias_sigma_rad_s = pose::PoseFilterOptions{}.gyro_bias_sigma_rad_s;
@@ -361,7 +362,7 @@ int RunPose(const PoseBenchOptions& o) {
   std::FILE* landmark_csv = o.landmark_csv.empty() ? nullptr : std::fopen(o.landmark_csv.c_str(), "w");
   if (landmark_csv) std::fprintf(landmark_csv, "row,t_s,id,on,observations,depth_m,true_depth_m,depth_sigma_m,u,v\n");
   if (nees_csv) {
-    std::fprintf(nees_csv, "row,t_s,keyframe,nees,nees_pos,nees_rot,dx,sx,dy,sy,dz,sz,dpitch,spitch,dyaw,syaw,droll,sroll,median_px\n");
+    std::fprintf(nees_csv, "row,t_s,keyframe,nees,nees_pos,nees_rot,dx,sx,dy,sy,dz,sz,dpitch,spitch,dyaw,syaw,droll,sroll,median_px,nis,reported_scale\n");
   }
   std::vector<Run> runs;
   for (int features : o.features) runs.push_back({features, "", features == 0 ? "gps_imu" : "gps_imu_vision_" + std::to_string(features), nullptr});
@@ -466,6 +467,7 @@ int RunPose(const PoseBenchOptions& o) {
     vo.feature_bias_px = o.feature_bias_px;
     vo.feature_point_bias_px = o.feature_point_bias_px;
     vo.acquisition_association_px = o.acquisition_association_px;
+    vo.nis_short_gain = o.nis_short_gain;
     vo.segment_detector = o.segments == "fld" ? pose::SegmentDetector::kFastLine : pose::SegmentDetector::kLsd;
     vo.feature_shared_bias_px = o.feature_shared_bias_px;
     vo.use_lines = o.lines;
@@ -491,6 +493,7 @@ int RunPose(const PoseBenchOptions& o) {
       if (!prior.valid) continue;
       double frame_ms = filter_ms;
       bool vision_keyframe = false;
+      double frame_nis = -1, frame_scale = 1;
       if (run.features > 0) {
         const pose::VisionFrameStats s = vision.Update(frame->bgr.data(), frame->width, frame->height, tracker.filter());
         row.detect_ms += s.detect_ms;
@@ -500,6 +503,8 @@ int RunPose(const PoseBenchOptions& o) {
         for (int st = 0; st < pose::kVisionStageCount; ++st) row.stage_ms[st] += s.stage_ms[st];
         row.keyframes += s.keyframe;
         vision_keyframe = s.keyframe;
+        frame_nis = s.nis;
+        frame_scale = s.reported_scale;
         row.weak_locks += s.weak_lock;
         row.relocks += s.relocks;
         row.rejected_gate += s.rejected_gate, row.rejected_behind += s.rejected_behind, row.rejected_not_finite += s.rejected_not_finite;
@@ -598,7 +603,7 @@ int RunPose(const PoseBenchOptions& o) {
         std::fprintf(nees_csv, "%s,%.4f,%d,%.4f,%.4f,%.4f", run.key.c_str(), t_s, static_cast<int>(vision_keyframe), nees, nees_pos, nees_rot);
         for (int i = 0; i < 3; ++i) std::fprintf(nees_csv, ",%.5f,%.5f", dp[i], std::sqrt(p_pos(i, i)));
         for (int i = 0; i < 3; ++i) std::fprintf(nees_csv, ",%.6f,%.6f", dth_c[i], std::sqrt(p_rot_c(i, i)));
-        std::fprintf(nees_csv, ",%.4f\n", row.frame_median_px.empty() ? -1.0 : row.frame_median_px.back());
+        std::fprintf(nees_csv, ",%.4f,%.3f,%.3f\n", row.frame_median_px.empty() ? -1.0 : row.frame_median_px.back(), frame_nis, frame_scale);
       }
       ++row.nees_frames;
       row.nees_in_band += nees >= kNeesLow && nees <= kNeesHigh;
@@ -814,6 +819,10 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--segments", o->segments, "keyframe line segment detector: lsd (OpenCV's LSD) or fld (ximgproc's Fast Line Detector)")
       ->capture_default_str()
       ->check(CLI::IsMember({"lsd", "fld"}));
+  sub.add_option("--nis-short-gain", o->nis_short_gain,
+                 "running-mean gain of the frames' NIS whose ratio to the long mean scales the reported covariance (0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 1.0));
   sub.add_option("--acquisition-association-px", o->acquisition_association_px,
                  "sigma of each point's persisting association error until the lock holds, px (issue 19, pose19e; 0: off)")
       ->capture_default_str()
