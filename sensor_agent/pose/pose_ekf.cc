@@ -314,7 +314,8 @@ std::optional<std::pair<Eigen::Vector3d, Eigen::Matrix3d>> PoseEkf::Landmark(int
   return std::make_pair(Eigen::Vector3d(landmarks_.segment<3>(3 * i)), Eigen::Matrix3d(landmark_cov_.block<3, 3>(3 * i, 3 * i)));
 }
 
-UpdateResult PoseEkf::UpdateLandmark(const PinholeIntrinsics& k, int64_t id, const Eigen::Vector2d& uv, double extra_variance_px2) {
+UpdateResult PoseEkf::UpdateLandmark(const PinholeIntrinsics& k, int64_t id, const Eigen::Vector2d& uv, double extra_variance_px2,
+                                     PointBias bias) {
   const int i = LandmarkIndex(id);
   if (i < 0 || !uv.allFinite() || !std::isfinite(extra_variance_px2)) return {Rejection::kNotFinite, 0};
   Eigen::Matrix<double, 2, kErrorDim> Hp;
@@ -336,7 +337,9 @@ UpdateResult PoseEkf::UpdateLandmark(const PinholeIntrinsics& k, int64_t id, con
   const Eigen::Matrix<double, kErrorDim, 2> K = ldlt.solve(PHt.transpose()).transpose();
   const Eigen::Matrix<double, Eigen::Dynamic, 2> KL = ldlt.solve(LHt.transpose()).transpose();
   P_ -= K * S * K.transpose();
+  current_biases_ = {bias.id >= 0 && std::isfinite(bias.sigma_px) && bias.sigma_px > 0 ? BiasIndex(bias.id, bias.sigma_px) : -1, -1};
   CorrectBiases<2>(K, Hp);  // the landmarks' own sensitivities are not kept (pose part only)
+  current_biases_ = {-1, -1};
   CorrectLandmarks<2>(K, KL, S, innovation);
   Inject(K * innovation);
   Condition();

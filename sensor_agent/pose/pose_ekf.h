@@ -199,7 +199,10 @@ class PoseEkf {
   std::optional<std::pair<Eigen::Vector3d, Eigen::Matrix3d>> Landmark(int64_t id) const;
   // A landmark seen at pixel `uv`: updates pose and every landmark (2x(15+3N) Jacobian).
   // `extra_variance_px2` adds to the pixel noise (e.g. a KLT track whose error persists).
-  UpdateResult UpdateLandmark(const PinholeIntrinsics& k, int64_t id, const Eigen::Vector2d& uv, double extra_variance_px2 = 0);
+  // `bias`: a persisting error of this landmark's sightings (a KLT track's offset repeats), as
+  // UpdatePoint's biases (pose part only).
+  UpdateResult UpdateLandmark(const PinholeIntrinsics& k, int64_t id, const Eigen::Vector2d& uv, double extra_variance_px2 = 0,
+                              PointBias bias = {});
   // Covariance of the full state [error state (15: pose, rates, gyro bias), landmarks (3N)] (for tests and NEES).
   Eigen::MatrixXd FullCovariance() const;
 

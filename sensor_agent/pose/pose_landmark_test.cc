@@ -166,5 +166,30 @@ TEST(PoseEkfLandmarks, LandmarksInitialisedFromThePoseKeepThePoseNeesConsistent)
   EXPECT_GT(nees_uncorrelated, 3 * nees_joint) << "joint " << nees_joint << " uncorrelated " << nees_uncorrelated;
 }
 
+// Issue 19: a landmark's sightings may carry a persisting error (its track's offset repeats); as a
+// consider bias it widens the reported pose covariance and leaves the estimate and the filter's own
+// covariance as they were.
+TEST(PoseEkfLandmarks, APersistingSightingBiasWidensOnlyTheReportedCovariance) {
+  const Rigid3d truth = LookAt(Eigen::Vector3d(0, 0, 1.7), Eigen::Vector3d(0, 10, 1.7));
+  const Eigen::Vector3d point(1.0, 12.0, 3.0);
+  const auto uv = ProjectToPixel(Camera(), truth.Inverse() * point);
+  ASSERT_TRUE(uv);
+  PoseEkf plain, biased;
+  for (PoseEkf* f : {&plain, &biased}) {
+    f->Initialize(0, truth, 0.5, 1 * kDeg);
+    ASSERT_TRUE(f->AddLandmark(7, point + Eigen::Vector3d(0.1, 0, -0.05), Eigen::Matrix3d::Identity() * 0.01));
+  }
+  for (int i = 1; i <= 30; ++i) {
+    const Eigen::Vector2d seen = *uv + Eigen::Vector2d(0.7, -0.4);  // the same offset every time
+    ASSERT_TRUE(plain.UpdateLandmark(Camera(), 7, seen).accepted());
+    ASSERT_TRUE(biased.UpdateLandmark(Camera(), 7, seen, 0, {100, 1.0}).accepted());
+  }
+  EXPECT_TRUE(biased.world_from_camera().translation.isApprox(plain.world_from_camera().translation, 1e-12));
+  EXPECT_EQ(biased.covariance(), plain.covariance());
+  EXPECT_EQ(biased.considered_bias_count(), 1);
+  EXPECT_GT(biased.PoseCovariance().trace(), plain.PoseCovariance().trace());
+  EXPECT_EQ(plain.considered_bias_count(), 0);
+}
+
 }  // namespace
 }  // namespace ave::pose

@@ -685,7 +685,8 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
       for (size_t i = 0; i < m.tracks.size(); ++i) {
         Track& t = m.tracks[i];
         if (!ekf.HasLandmark(t.id)) continue;
-        const UpdateResult r = ekf.UpdateLandmark(m.k, t.id, t.uv, m.options.landmark_sigma_px * m.options.landmark_sigma_px);
+        const PointBias bias{m.options.landmark_bias_px > 0 ? 4 * static_cast<int64_t>(m.map.points.size()) + t.id : -1, m.options.landmark_bias_px};
+        const UpdateResult r = ekf.UpdateLandmark(m.k, t.id, t.uv, m.options.landmark_sigma_px * m.options.landmark_sigma_px, bias);
         Count(r, stats.new_points_used, stats);
         if (!r.accepted()) {
           ekf.RemoveLandmark(t.id);

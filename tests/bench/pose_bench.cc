@@ -52,6 +52,7 @@ struct PoseBenchOptions {
   std::string camera = "backpack";
   double seconds = 10;
   std::vector<int> features = {0, 10, 25, 50, 100};
+  std::vector<std::string> rows;  // run only these rows (JSON keys); empty: all
   std::string png = "pose_bench.png";
   bool lines = true, new_points = true;
   double ahrs_correlation_s = 1.0;  // PoseFilterOptions::orientation_correlation_s
@@ -66,7 +67,8 @@ struct PoseBenchOptions {
   double feature_bias_px = pose::VisionOptions{}.feature_bias_px;
   double feature_point_bias_px = pose::VisionOptions{}.feature_point_bias_px;  // issue 19 (pose19e)
   double acquisition_association_px = pose::VisionOptions{}.acquisition_association_px;
-  double nis_short_gain = pose::VisionOptions{}.nis_short_gain;  // issue 19: reported covariance follows the innovations
+  double nis_short_gain = pose::VisionOptions{}.nis_short_gain;
+  double landmark_bias_px = pose::VisionOptions{}.landmark_bias_px;  // issue 19: reported covariance follows the innovations
   std::string segments = pose::VisionOptions{}.segment_detector == pose::SegmentDetector::kLsd ? "lsd" : "fld";  // issue 19
   double feature_shared_bias_px = pose::VisionOptions{}.feature_shared_bias_px;
   double gyro_bias_sigma_rad_s = pose::PoseFilterOptions{}.gyro_bias_sigma_rad_s;
@@ -440,6 +442,9 @@ int RunPose(const PoseBenchOptions& o) {
     add("bus covering half the image 3-6 s", "bus", nullptr, &bus);
     add("camera bumped 5 deg at 5.0-5.2 s", "bump", nullptr, &bump);
   }
+  if (!o.rows.empty()) {  // only the rows named (their JSON keys)
+    std::erase_if(runs, [&](const Run& r) { return std::find(o.rows.begin(), o.rows.end(), r.key) == o.rows.end(); });
+  }
   const cv::Mat bus_texture = BusTexture();
 
   std::vector<Row> rows;
@@ -468,6 +473,7 @@ int RunPose(const PoseBenchOptions& o) {
     vo.feature_point_bias_px = o.feature_point_bias_px;
     vo.acquisition_association_px = o.acquisition_association_px;
     vo.nis_short_gain = o.nis_short_gain;
+    vo.landmark_bias_px = o.landmark_bias_px;
     vo.segment_detector = o.segments == "fld" ? pose::SegmentDetector::kFastLine : pose::SegmentDetector::kLsd;
     vo.feature_shared_bias_px = o.feature_shared_bias_px;
     vo.use_lines = o.lines;
@@ -819,6 +825,11 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--segments", o->segments, "keyframe line segment detector: lsd (OpenCV's LSD) or fld (ximgproc's Fast Line Detector)")
       ->capture_default_str()
       ->check(CLI::IsMember({"lsd", "fld"}));
+  sub.add_option("--rows", o->rows, "run only the rows with these JSON keys (e.g. gps_imu_vision_50,gps_imu_vision_joint_50; default: all)")
+      ->delimiter(',');
+  sub.add_option("--landmark-bias-px", o->landmark_bias_px, "persisting error of each landmark's sightings (joint mode), px, a consider bias (0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 10.0));
   sub.add_option("--nis-short-gain", o->nis_short_gain,
                  "running-mean gain of the frames' NIS whose ratio to the long mean scales the reported covariance (0: off)")
       ->capture_default_str()
