@@ -406,7 +406,8 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
   const cv::Size window(m.options.klt_window_px, m.options.klt_window_px);
   std::vector<cv::Mat> pyramid;
   cv::buildOpticalFlowPyramid(gray, pyramid, window, m.options.klt_levels);
-  const bool track_unknown = m.options.use_new_points && !m.previous_pyramid.empty();
+  const bool unknown_wanted = m.options.use_new_points || m.options.new_points_in_pose || m.options.joint_new_points;
+  const bool track_unknown = unknown_wanted && !m.previous_pyramid.empty();
   auto predicted_px = [&](const Eigen::Vector3d& p, const cv::Point2f& fallback) {
     const std::optional<Eigen::Vector2d> uv = ekf.ProjectPoint(m.k, p);
     if (!uv) return fallback;
@@ -677,7 +678,7 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
   }
 
   // 4. Unknown features.
-  if (m.options.use_new_points) {
+  if (unknown_wanted) {
     // Joint mode: the features in the filter's state update pose and structure together; one that
     // disagrees leaves the state and is dropped.
     std::vector<bool> drop(m.tracks.size(), false);

@@ -50,7 +50,11 @@ struct VisionOptions {
   // Issue 19 (moonshot): the Fast Line Detector, its matched segments refined to sub-pixel, costs a
   // sixth of LSD (0.29 against 1.96 ms a frame) at the same accuracy (docs/BENCHMARKS.md, "Fast Line Detector").
   SegmentDetector segment_detector = SegmentDetector::kFastLine;
-  bool use_new_points = true;     // track a priori unknown features and estimate their 3D structure
+  // Track a priori unknown features and estimate their 3D structure even though neither
+  // new_points_in_pose nor joint_new_points uses them (for their figures); either of those tracks
+  // them anyway. Off by default since issue 19's moonshot: the known-only pose paid ~0.6 ms a frame
+  // for features nothing used.
+  bool use_new_points = false;
   // Let converged unknown features correct the pose too. Off by default: without the pose-point
   // cross-correlations (not kept here) their errors feed back into the pose, which then drifts
   // (ave-bench pose shows the row; docs/BENCHMARKS.md).

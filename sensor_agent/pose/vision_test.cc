@@ -219,6 +219,7 @@ TEST_F(VisionTest, UnknownFeaturesReMatchedOnTheKeyframeDriftLessThanChainedFram
     VisionOptions options;
     options.lock_frames = 3;
     options.lock_sigma_px = 4;
+    options.use_new_points = true;  // tracked, not used by the pose
     options.unknown_from_keyframe = from_keyframe;
     VisionTracker vision(CampusFeatureMap(scenario_->world), mesh, k, options);
     std::map<int64_t, std::pair<int, Eigen::Vector3d>> start;  // track id -> (frame, mesh point)

@@ -381,7 +381,7 @@ int RunPose(const PoseBenchOptions& o) {
     add("keyframe every 20", "keyframe_20", [](pose::VisionOptions& v) { v.keyframe_interval = 20; });
     add("no visibility cache", "no_visibility_cache", [](pose::VisionOptions& v) { v.visibility_cache_m = 0; });
     add("never declared lost", "never_lost", [](pose::VisionOptions& v) { v.lost_frames = 0; });
-    add("no unknown features", "no_unknown", [](pose::VisionOptions& v) { v.use_new_points = false; });
+    add("unknown features tracked though unused (the default before issue 19's moonshot)", "unused_unknown", [](pose::VisionOptions& v) { v.use_new_points = true; });
   }
   if (o.consistency_knobs) {  // issue 19: the filter's noise model against NEES
     auto add_filter = [&](const std::string& knob, const std::string& key, std::function<void(pose::PoseFilterOptions&)> tweak,
@@ -477,7 +477,6 @@ int RunPose(const PoseBenchOptions& o) {
     vo.segment_detector = o.segments == "fld" ? pose::SegmentDetector::kFastLine : pose::SegmentDetector::kLsd;
     vo.feature_shared_bias_px = o.feature_shared_bias_px;
     vo.use_lines = o.lines;
-    vo.use_new_points = o.new_points;
     if (run.tweak) run.tweak(vo);
     pose::VisionTracker vision(map, mesh, k, vo);
     const bool peer = run.features == 50 && run.key == "gps_imu_vision_50";
@@ -799,7 +798,7 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--seconds", o->seconds, "scene time simulated")->capture_default_str()->check(ave::cli::Range(0.5, 600.0));
   sub.add_option("--features", o->features, "vision features per frame to sweep (0 = GPS+inertial only)")->delimiter(',');
   sub.add_option("--lines", o->lines, "use known 3D line features")->capture_default_str();
-  sub.add_option("--new-points", o->new_points, "track and triangulate unknown point features (and add the row where they correct the pose)")
+  sub.add_option("--new-points", o->new_points, "add the rows where unknown point features are tracked, triangulated and correct the pose (joint and issue-5 modes)")
       ->capture_default_str();
   sub.add_option("--acquiring-sigma", o->acquiring_sigma_px, "extra pixel noise of full matchings until the lock holds (issue 19)")
       ->capture_default_str()
