@@ -45,6 +45,7 @@ std::string PoseFilterOptions::Check() const {
   if (!(std::isfinite(orientation_correlation_s) && orientation_correlation_s >= 0)) return "orientation_correlation_s must be finite and >= 0";
   if (!(std::isfinite(gyro_correlation_s) && gyro_correlation_s >= 0)) return "gyro_correlation_s must be finite and >= 0";
   if (!(std::isfinite(gps_correlation_s) && gps_correlation_s >= 0)) return "gps_correlation_s must be finite and >= 0";
+  if (!(std::isfinite(gps_bias_sigma_m) && gps_bias_sigma_m >= 0)) return "gps_bias_sigma_m must be finite and >= 0";
   if (!positive(gyro_sigma_rad_s)) return "gyro_sigma_rad_s must be finite and > 0";
   if (!positive(gyro_bias_sigma_rad_s)) return "gyro_bias_sigma_rad_s must be finite and > 0";
   if (!(std::isfinite(gyro_bias_random_walk_rad_s_sqrt_s) && gyro_bias_random_walk_rad_s_sqrt_s >= 0)) {
@@ -70,7 +71,8 @@ const char* RejectionName(Rejection r) {
 
 PoseEkf::PoseEkf(PoseFilterOptions options) : options_(options) {}
 
-void PoseEkf::Initialize(int64_t t_ns, const Rigid3d& world_from_camera, double position_sigma_m, double orientation_sigma_rad) {
+void PoseEkf::Initialize(int64_t t_ns, const Rigid3d& world_from_camera, double position_sigma_m, double orientation_sigma_rad,
+                         bool position_from_gps_fix) {
   t_ns_ = t_ns;
   p_ = world_from_camera.translation;
   q_ = world_from_camera.rotation.normalized();
@@ -85,6 +87,9 @@ void PoseEkf::Initialize(int64_t t_ns, const Rigid3d& world_from_camera, double 
       Eigen::Vector3d::Constant(orientation_sigma_rad), Eigen::Vector3d::Constant(0.5), Eigen::Vector3d::Constant(bias_sigma);
   P_ = sigma.cwiseAbs2().asDiagonal();
   reported_scale_ = 1;
+  // A position taken from a fix carries the fix's bias: error = truth - fix = -(noise + bias).
+  gps_bias_sensitivity_.setZero();
+  if (position_from_gps_fix) gps_bias_sensitivity_.block<3, 3>(kPos, 0) = -Eigen::Matrix3d::Identity();
   bias_ids_.clear();
   bias_sigma_px_.clear();
   bias_sensitivity_.resize(kErrorDim, 0);
@@ -167,6 +172,7 @@ void PoseEkf::Inject(const StateVector& dx) {
 }
 
 void PoseEkf::PropagateBiases(const StateMatrix& transition) {
+  if (options_.gps_bias_sigma_m > 0) gps_bias_sensitivity_ = (transition * gps_bias_sensitivity_).eval();
   if (bias_ids_.empty()) return;
   bias_sensitivity_ = (transition * bias_sensitivity_).eval();
 }
@@ -175,6 +181,12 @@ void PoseEkf::PropagateBiases(const StateMatrix& transition) {
 // sensitivity goes through (I - K H), and the bias this measurement carries adds -K.
 template <int M>
 void PoseEkf::CorrectBiases(const Eigen::Matrix<double, kErrorDim, M>& K, const Eigen::Matrix<double, M, kErrorDim>& H) {
+  if (options_.gps_bias_sigma_m > 0) {
+    gps_bias_sensitivity_ -= K * (H * gps_bias_sensitivity_);
+    if constexpr (M == 3) {
+      if (applying_gps_) gps_bias_sensitivity_ -= K;  // this fix carries the bias
+    }
+  }
   if (bias_ids_.empty()) return;
   bias_sensitivity_ -= K * (H * bias_sensitivity_);
   if constexpr (M == 2) {
@@ -185,6 +197,9 @@ void PoseEkf::CorrectBiases(const Eigen::Matrix<double, kErrorDim, M>& K, const 
 
 StateMatrix PoseEkf::ConsideredBiasCovariance() const {
   StateMatrix c = StateMatrix::Zero();
+  if (options_.gps_bias_sigma_m > 0) {
+    c += options_.gps_bias_sigma_m * options_.gps_bias_sigma_m * gps_bias_sensitivity_ * gps_bias_sensitivity_.transpose();
+  }
   for (size_t i = 0; i < bias_ids_.size(); ++i) {
     const auto g = bias_sensitivity_.middleCols<2>(2 * static_cast<Eigen::Index>(i));
     c += bias_sigma_px_[i] * bias_sigma_px_[i] * g * g.transpose();
@@ -361,7 +376,10 @@ UpdateResult PoseEkf::UpdatePosition(const Eigen::Vector3d& position_m, const Ei
   for (int i = 0; i < 3; ++i) R(i, i) = std::max(R(i, i), floor);
   Eigen::Matrix<double, 3, kErrorDim> H = Eigen::Matrix<double, 3, kErrorDim>::Zero();
   H.block<3, 3>(0, kPos).setIdentity();
-  return Correct<3>(position_m - p_, H, R, options_.gate_chi2_3dof);
+  applying_gps_ = true;
+  const UpdateResult r = Correct<3>(position_m - p_, H, R, options_.gate_chi2_3dof);
+  applying_gps_ = false;
+  return r;
 }
 
 UpdateResult PoseEkf::UpdateOrientation(const Eigen::Quaterniond& world_from_camera, double sigma_rad) {
@@ -491,7 +509,7 @@ Matrix6d PoseEkf::PoseCovariance() const {
   c.topRightCorner<3, 3>() = P_.block<3, 3>(kPos, kRot);
   c.bottomLeftCorner<3, 3>() = P_.block<3, 3>(kRot, kPos);
   c.bottomRightCorner<3, 3>() = P_.block<3, 3>(kRot, kRot) + considered_rot_;
-  if (!bias_ids_.empty()) {
+  if (!bias_ids_.empty() || options_.gps_bias_sigma_m > 0) {
     const StateMatrix b = ConsideredBiasCovariance();
     c.topLeftCorner<3, 3>() += b.block<3, 3>(kPos, kPos);
     c.topRightCorner<3, 3>() += b.block<3, 3>(kPos, kRot);

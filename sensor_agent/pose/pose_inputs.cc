@@ -173,7 +173,7 @@ void PoseTracker::Apply(const GpsReading& g) {
     if (!first_orientation_) return;
     const double sigma = std::sqrt(std::max(g.covariance.trace() / 3, ekf_.options().gps_min_sigma_m * ekf_.options().gps_min_sigma_m));
     ekf_.Initialize(g.t_ns, Rigid3d(first_orientation_->orientation, g.position_m), sigma,
-                    ekf_.options().orientation_sigma_deg * 3.14159265358979323846 / 180);
+                    ekf_.options().orientation_sigma_deg * 3.14159265358979323846 / 180, /*position_from_gps_fix=*/true);
     last_valid_gps_ns_ = g.t_ns;
     ++stats_.gps_used;
     return;

@@ -100,26 +100,35 @@ TEST(PoseTracker, RejectsRepeatedAndBackwardsTimeStampsAndGatesA50MetreOutlier) 
 // Issue 19, session pose19e: multipath is a slowly varying GPS offset, not white noise. A walker's
 // fixes all 1 m off to the east (a multipath offset near a building, reported as 5 cm) for 10 s:
 // taken as white, the fixes average the offset "away" and the filter ends confident of the wrong
-// position; weighted as correlated over 30 s (gps_correlation_s), its position sigma covers it.
+// position; weighted as correlated over 30 s (gps_correlation_s), its position sigma covers it, and
+// so does the default since the evening of issue 19: the offset as a persisting bias of every fix
+// (gps_bias_sigma_m, a consider term: the same estimate as white).
 TEST(PoseTracker, CorrelatedGpsMultipathIsNotAveragedAwayByManyFixes) {
   SensorLog log = WalkLog(10);
   for (GpsReading& g : log.gps) g.position_m.x() += 1.0;
-  double z_white = 0, z_correlated = 0, sigma_correlated = 0;
-  for (const double correlation : {0.0, 30.0}) {
+  struct Case {
+    double correlation_s, bias_sigma_m;
+    double z = 0, sigma = 0, error = 0;
+  };
+  Case white{0, 0}, correlated{30, 0}, biased{0, PoseFilterOptions{}.gps_bias_sigma_m};
+  ASSERT_GT(biased.bias_sigma_m, 0);
+  for (Case* c : {&white, &correlated, &biased}) {
     PoseFilterOptions o;
-    o.gps_correlation_s = correlation;
+    o.gps_correlation_s = c->correlation_s;
+    o.gps_bias_sigma_m = c->bias_sigma_m;
     PoseTracker tracker(log, o);
     const PoseSample s = tracker.Advance(10 * kSecond);
     ASSERT_TRUE(s.valid);
-    const double error = s.world_from_camera.translation.x() - Walk(10).translation.x();
-    const double sigma = std::sqrt(s.covariance(0, 0));
-    (correlation > 0 ? z_correlated : z_white) = std::abs(error) / sigma;
-    if (correlation > 0) sigma_correlated = sigma;
-    EXPECT_NEAR(error, 1.0, 0.35) << correlation;  // nothing here can tell the offset from the position
+    c->error = s.world_from_camera.translation.x() - Walk(10).translation.x();
+    c->sigma = std::sqrt(s.covariance(0, 0));
+    c->z = std::abs(c->error) / c->sigma;
+    EXPECT_NEAR(c->error, 1.0, 0.35) << c->correlation_s << " " << c->bias_sigma_m;  // nothing here can tell the offset from the position
   }
-  EXPECT_GT(z_white, 3.0);        // overconfident (3.8 sigma)
-  EXPECT_LT(z_correlated, 2.0);   // covers the offset (0.5 sigma)
-  EXPECT_LT(sigma_correlated, 5.0);  // and still bounded
+  EXPECT_GT(white.z, 3.0);            // overconfident (3.8 sigma)
+  EXPECT_LT(correlated.z, 2.0);       // covers the offset (0.5 sigma)
+  EXPECT_LT(correlated.sigma, 5.0);   // and still bounded
+  EXPECT_LT(biased.z, 2.5);           // covers it too (1.75 sigma)
+  EXPECT_EQ(biased.error, white.error);  // with the white estimate
 }
 
 TEST(PoseTracker, NoPoseUntilTheFirstFixAndOrientation) {

@@ -58,6 +58,7 @@ struct PoseBenchOptions {
   double ahrs_correlation_s = 1.0;  // PoseFilterOptions::orientation_correlation_s
   double gps_correlation_s = pose::PoseFilterOptions{}.gps_correlation_s;  // issue 19 (pose19e)
   double gps_min_sigma_m = pose::PoseFilterOptions{}.gps_min_sigma_m;
+  double gps_bias_sigma_m = pose::PoseFilterOptions{}.gps_bias_sigma_m;  // issue 19: multipath as a consider bias
   double gyro_correlation_s = pose::PoseFilterOptions{}.gyro_correlation_s;  // issue 19
   double acquiring_sigma_px = pose::VisionOptions{}.acquiring_sigma_px;  // issue 19
   double gyro_sigma_rad_s = pose::PoseFilterOptions{}.gyro_sigma_rad_s;
@@ -459,6 +460,7 @@ int RunPose(const PoseBenchOptions& o) {
     fo.gyro_correlation_s = o.gyro_correlation_s;
     fo.gps_correlation_s = o.gps_correlation_s;
     fo.gps_min_sigma_m = o.gps_min_sigma_m;
+    fo.gps_bias_sigma_m = o.gps_bias_sigma_m;
     fo.gyro_sigma_rad_s = o.gyro_sigma_rad_s;
     fo.estimate_gyro_bias = o.gyro_bias;
     fo.gyro_bias_sigma_rad_s = o.gyro_bias_sigma_rad_s;
@@ -850,6 +852,9 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--gps-correlation", o->gps_correlation_s, "seconds over which GPS errors (multipath) are correlated (0: white)")
       ->capture_default_str()
       ->check(ave::cli::Range(0, 1e6));
+  sub.add_option("--gps-bias-sigma", o->gps_bias_sigma_m, "GPS multipath as a persisting bias of every fix, sigma per axis in m, a consider term (0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 100.0));
   sub.add_option("--gps-min-sigma", o->gps_min_sigma_m, "floor of the GPS fixes' sigma, m (PoseFilterOptions::gps_min_sigma_m)")
       ->capture_default_str()
       ->check(ave::cli::Range(1e-3, 100.0));
