@@ -85,6 +85,7 @@ std::string VisionOptions::Check() const {
   if (lost_frames < 0 || !(lost_orientation_sigma_deg >= 0)) return "lost_frames and lost_orientation_sigma_deg must be >= 0";
   if (!(tracked_sigma_px >= 0)) return "tracked_sigma_px must be >= 0";
   if (!(landmark_sigma_px >= 0)) return "landmark_sigma_px must be >= 0";
+  if (!(landmark_bias_px >= 0 && std::isfinite(landmark_bias_px))) return "landmark_bias_px must be finite and >= 0";
   if (!(join_depth_sigma_scale > 0 && std::isfinite(join_depth_sigma_scale))) return "join_depth_sigma_scale must be finite and > 0";
   if (!(new_point_depth_sigma_ratio >= 0 && std::isfinite(new_point_depth_sigma_ratio))) return "new_point_depth_sigma_ratio must be finite and >= 0";
   if (!(join_bearing_drift_px >= 0 && std::isfinite(join_bearing_drift_px))) return "join_bearing_drift_px must be finite and >= 0";

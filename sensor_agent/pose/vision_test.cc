@@ -96,6 +96,34 @@ TEST_F(VisionTest, StabilisesAPerturbedBackpackPoseToAFewPixels) {
   EXPECT_TRUE(ekf.world_from_camera().translation.isApprox(pose.translation));
 }
 
+// Issue 19 (moonshot): unknown features cost ~1 ms a frame, so they are tracked only when something
+// uses them (joint mode, the issue-5 mode, or use_new_points for their figures).
+TEST_F(VisionTest, UnknownFeaturesAreTrackedOnlyWhenSomethingUsesThem) {
+  const scene::CameraSpec& camera = *scenario_->world.FindCamera("backpack");
+  const sim::SimulatedCamera sim_camera(scenario_->world, camera, scenario_->EffectsForCamera("backpack"), scenario_->seed);
+  auto tracked = [&](const VisionOptions& options) {
+    VisionTracker vision(CampusFeatureMap(scenario_->world), scene::BuildStaticMesh(scenario_->world, 2.0), camera.intrinsics, options);
+    PoseEkf ekf;
+    const int first = 120;
+    ekf.Initialize(static_cast<int64_t>(std::llround(first * 1e9 / 30)), sim_camera.PoseAt(first / 30.0), 0.3, 0.5 * kDeg);
+    int most = 0;
+    for (int f = first; f < first + 4; ++f) {
+      sim::SimImage frame = sim_camera.Frame(f, f / 30.0);
+      ekf.Predict(static_cast<int64_t>(std::llround(f * 1e9 / 30)));
+      const VisionFrameStats s = vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
+      EXPECT_EQ(s.new_points_tracked, static_cast<int>(s.unknown_tracks.size()));
+      most = std::max(most, s.new_points_tracked);
+    }
+    return most;
+  };
+  VisionOptions known_only, joint, figures;
+  joint.joint_new_points = true;
+  figures.use_new_points = true;
+  EXPECT_EQ(tracked(known_only), 0);
+  EXPECT_GT(tracked(joint), 20);
+  EXPECT_GT(tracked(figures), 20);
+}
+
 // Issue 19 (moonshot): the Fast Line Detector (default) and LSD both find the model's edges on a
 // keyframe, and each stabilises the perturbed pose.
 TEST_F(VisionTest, BothSegmentDetectorsMatchTheModelLinesAndStabiliseThePose) {
@@ -320,6 +348,9 @@ TEST(VisionOptions, CheckNamesTheBadField) {
   o = VisionOptions();
   o.join_depth_sigma_scale = 0;
   EXPECT_THAT(o.Check(), ::testing::HasSubstr("join_depth_sigma_scale"));
+  o = VisionOptions();
+  o.landmark_bias_px = std::nan("");
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("landmark_bias_px"));
   o = VisionOptions();
   o.nis_long_gain = 0;
   EXPECT_THAT(o.Check(), ::testing::HasSubstr("nis_long_gain"));
