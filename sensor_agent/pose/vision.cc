@@ -23,6 +23,7 @@ namespace ave::pose {
 namespace {
 
 using namespace internal;  // NOLINT: the front end's own helpers
+constexpr double kDegToRad = 3.14159265358979323846 / 180;
 
 // An a priori unknown point: its pixel track and its 3D estimate (local frame) with covariance:
 // anchored inverse depth (feature_depth.h) until it joins the pose filter's state, then the state's.
@@ -82,6 +83,10 @@ std::string VisionOptions::Check() const {
   if (keyframe_interval < 1) return "keyframe_interval must be >= 1";
   if (min_tracked_known < 0) return "min_tracked_known must be >= 0";
   if (lock_frames < 0) return "lock_frames must be >= 0";
+  if (!(acquisition_roll_search_deg >= 0 && acquisition_roll_search_deg <= 30) || !(acquisition_roll_step_deg > 0))
+    return "acquisition_roll_search_deg must be in [0, 30] and acquisition_roll_step_deg > 0";
+  if (!(lock_alignment_px >= 0)) return "lock_alignment_px must be >= 0";
+  if (acquisition_coarse_passes < 1) return "acquisition_coarse_passes must be >= 1";
   if (lost_frames < 0 || !(lost_orientation_sigma_deg >= 0)) return "lost_frames and lost_orientation_sigma_deg must be >= 0";
   if (!(tracked_sigma_px >= 0)) return "tracked_sigma_px must be >= 0";
   if (!(landmark_sigma_px >= 0)) return "landmark_sigma_px must be >= 0";
@@ -611,14 +616,31 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
     cv::Mat edge_distance, skyline_distance;
     EdgeDistances(gray, edge_distance, skyline_distance);
     timer.Lap(kStageEdges);
-    const Eigen::Vector2d offset = ChamferOffset(edge_distance, samples, skyline_distance, sky_samples, m.options.search_radius_px);
-    stats.coarse_offset_px = offset;
+    // Until the lock holds (and when it weakens) the search turns the image too: the AHRS's roll
+    // error is not a shift.
+    const bool turn = m.good_full_matches < m.options.lock_frames || stats.weak_lock;
+    const Eigen::Vector2d centre(m.k.cx, m.k.cy);
+    const ImageAlignment alignment =
+        ChamferAlign(edge_distance, samples, skyline_distance, sky_samples, m.options.search_radius_px, centre,
+                     turn ? m.options.acquisition_roll_search_deg * kDegToRad : 0.0, m.options.acquisition_roll_step_deg * kDegToRad);
+    stats.coarse_offset_px = alignment.offset;
+    stats.coarse_rotation_rad = alignment.rotation_rad;
     timer.Lap(kStageChamfer);
-    const std::vector<std::pair<int, int>> coarse_matches = MatchPoints(predicted, corners, offset, kCoarseMatch_px);
+    std::vector<std::pair<int, Eigen::Vector2d>> moved = predicted;
+    for (auto& [index, uv] : moved) uv = alignment.Apply(uv, centre);
+    const std::vector<std::pair<int, int>> coarse_matches = MatchPoints(moved, corners, Eigen::Vector2d::Zero(), kCoarseMatch_px);
     timer.Lap(kStageMatch);
     PoseEkf coarse = ekf;
     for (const auto& [index, j] : coarse_matches) {
       (void)coarse.UpdatePoint(m.k, m.map.points[index], Eigen::Vector2d(corners[j].x, corners[j].y));
+    }
+    // Until the lock holds: the coarse pass again from the coarse pose (matched within the coarse
+    // radius, applied to a fresh copy of the filter), as the pose that the first matches pulled
+    // brings more of the image's corners within reach (iterated re-linearisation).
+    for (int pass = 1; turn && pass < m.options.acquisition_coarse_passes; ++pass) {
+      const std::vector<std::pair<int, int>> again = MatchPoints(m.PredictPoints(coarse), corners, Eigen::Vector2d::Zero(), kCoarseMatch_px);
+      coarse = ekf;
+      for (const auto& [index, j] : again) (void)coarse.UpdatePoint(m.k, m.map.points[index], Eigen::Vector2d(corners[j].x, corners[j].y));
     }
     timer.Lap(kStageEkf);
 
@@ -667,7 +689,14 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
     }
     // The lock: enough features applied and few rejected; tracking resumes after lock_frames of these.
     const int applied = stats.points_used + stats.lines_used, tried = applied + stats.rejected;
-    const bool good = applied >= m.options.min_tracked_known && stats.rejected <= m.options.weak_lock_gated_share * tried;
+    // ... and the model's edges lay down on the frame's where the filter predicts them: a coarse
+    // alignment that had to move the image means the matches were taken from a pose that was off,
+    // and a lock formed there holds a wrong association (issue 19, sixth session).
+    // (A turn of one search step, 0.5 deg, is the prediction's ordinary roll error without an AHRS.)
+    const bool aligned = !(m.options.lock_alignment_px > 0) ||
+                         (alignment.offset.norm() <= m.options.lock_alignment_px &&
+                          std::abs(alignment.rotation_rad) <= m.options.acquisition_roll_step_deg * kDegToRad + 1e-9);
+    const bool good = applied >= m.options.min_tracked_known && stats.rejected <= m.options.weak_lock_gated_share * tried && aligned;
     m.good_full_matches = good ? m.good_full_matches + 1 : 0;
     m.bad_full_matches = good ? 0 : m.bad_full_matches + 1;
     if (m.options.lost_frames > 0 && m.bad_full_matches >= m.options.lost_frames) {

@@ -120,6 +120,19 @@ struct VisionOptions {
   // the pose covariance is widened by these sigmas. Off (0) by default: 1 m / 1 deg left the
   // first frames out of the 95 % band all the same (docs/POSE.md, "Gyro bias").
   double acquisition_position_sigma_m = 0;
+  // Until the lock holds and on weak-lock keyframes, the coarse chamfer search also turns the image
+  // about the principal point, up to +-this in steps of acquisition_roll_step_deg (issue 19, sixth
+  // session: an AHRS roll error of 1.5 deg moves the image edges 8 px, beyond the coarse match
+  // radius, and the lock formed on the central corners alone with the roll left as it was). 0: off.
+  double acquisition_roll_search_deg = 3;
+  double acquisition_roll_step_deg = 0.5;
+  // A full matching counts towards the lock (lock_frames) only when its coarse alignment moved the
+  // image by at most this (px) and turned it by at most one acquisition_roll_step_deg; otherwise
+  // towards lost_frames. A lock formed from a prediction the chamfer search had to
+  // move holds the wrong corners (issue 19, sixth session: 7 of 13 noise draws of the campus run
+  // locked 2-20 px off without this). 0: not checked.
+  double lock_alignment_px = 3;
+  int acquisition_coarse_passes = 1;  // coarse passes (match, update a copy) while acquiring: 1 = one, as on locked keyframes
   double acquisition_orientation_sigma_deg = 0;
   // Persisting detection bias of the known features (issue 19, docs/POSE.md "NEES by cause"): a
   // rendered or real building corner is found 0.2-0.4 px off its model point the same way at every
@@ -205,6 +218,7 @@ struct VisionFrameStats {
   int new_points_tracked = 0, new_points_converged = 0;
   int rejected = 0;          // gated or behind the camera
   Eigen::Vector2d coarse_offset_px = Eigen::Vector2d::Zero();  // the coarse pass's image shift
+  double coarse_rotation_rad = 0;  // ... and turn about the principal point (acquisition_roll_search_deg)
   double detect_ms = 0;      // corner/segment detection, KLT tracking, matching
   double update_ms = 0;      // EKF updates (both passes) and unknown-feature filters
   std::array<double, kVisionStageCount> stage_ms{};  // thread CPU ms per stage (detect_ms + update_ms in wall time)

@@ -1,6 +1,7 @@
 #pragma once
 // Internal to the vision front end (vision.cc, vision_match.cc and their tests): image-side
 // matching helpers. Includes OpenCV; do not include from public headers.
+#include <cmath>
 #include <utility>
 #include <vector>
 
@@ -34,6 +35,28 @@ int Nearest(const std::vector<cv::Point2f>& corners, const Eigen::Vector2d& uv, 
 // on the frame's skyline; a 2 px grid over the window, then 1 px around the best.
 Eigen::Vector2d ChamferOffset(const cv::Mat& edge_distance, const std::vector<Eigen::Vector2d>& samples, const cv::Mat& skyline_distance,
                               const std::vector<Eigen::Vector2d>& sky_samples, double radius);
+
+// The image motion that best lays the model edges on the frame's: an offset (px) and a rotation
+// about `centre` (the principal point; rad, positive turns +u towards +v). A camera rolled by r
+// shows its image turned by -r about the principal point.
+struct ImageAlignment {
+  Eigen::Vector2d offset = Eigen::Vector2d::Zero();
+  double rotation_rad = 0;
+  double score_px = 0;  // the chamfer score at the best motion (mean truncated edge distance, sky term added)
+  Eigen::Vector2d Apply(const Eigen::Vector2d& uv, const Eigen::Vector2d& centre) const {
+    const double c = std::cos(rotation_rad), s = std::sin(rotation_rad);
+    const Eigen::Vector2d d = uv - centre;
+    return centre + Eigen::Vector2d(c * d.x() - s * d.y(), s * d.x() + c * d.y()) + offset;
+  }
+};
+
+// ChamferOffset, and then, when max_rotation_rad > 0, image rotations about `centre` in steps of
+// rotation_step_rad up to +-max_rotation_rad, each with the offset searched again within 8 px of
+// the unrotated best (issue 19: an AHRS roll error of 1.5 deg moves the image's edges 8 px, beyond
+// the coarse match radius, so a translation alone leaves roll to the few central corners).
+ImageAlignment ChamferAlign(const cv::Mat& edge_distance, const std::vector<Eigen::Vector2d>& samples, const cv::Mat& skyline_distance,
+                            const std::vector<Eigen::Vector2d>& sky_samples, double radius, const Eigen::Vector2d& centre,
+                            double max_rotation_rad, double rotation_step_rad);
 
 // Distance transforms of the Canny edges and of the skyline (in each column, the first edge pixel
 // from the top) of a grey frame.

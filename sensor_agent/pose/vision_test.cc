@@ -331,6 +331,15 @@ TEST(VisionOptions, CheckNamesTheBadField) {
   o.max_features = -1;
   EXPECT_THAT(o.Check(), ::testing::HasSubstr("max_features"));
   o = VisionOptions();
+  o.acquisition_roll_search_deg = 45;
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("acquisition_roll_search_deg"));
+  o = VisionOptions();
+  o.lock_alignment_px = -1;
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("lock_alignment_px"));
+  o = VisionOptions();
+  o.acquisition_coarse_passes = 0;
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("acquisition_coarse_passes"));
+  o = VisionOptions();
   o.keyframe_interval = 0;
   EXPECT_THAT(o.Check(), ::testing::HasSubstr("keyframe_interval"));
   o = VisionOptions();

@@ -22,6 +22,9 @@
 #include <tuple>
 #include <vector>
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <Eigen/Core>
 #include <Eigen/Cholesky>
 #include <opencv2/calib3d.hpp>
@@ -59,6 +62,11 @@ struct PoseBenchOptions {
   double gps_correlation_s = pose::PoseFilterOptions{}.gps_correlation_s;  // issue 19 (pose19e)
   double gps_min_sigma_m = pose::PoseFilterOptions{}.gps_min_sigma_m;
   double gps_bias_sigma_m = pose::PoseFilterOptions{}.gps_bias_sigma_m;  // issue 19: multipath as a consider bias
+  int seed = 0;  // added to the scenario's seed: another draw of every noise (GPS, IMU, camera)
+  int seeds = 1;  // > 1: Monte Carlo over seeds seed .. seed + seeds - 1 (RunPoseSeeds)
+  double roll_search_deg = pose::VisionOptions{}.acquisition_roll_search_deg;  // issue 19, sixth session
+  int acquisition_passes = pose::VisionOptions{}.acquisition_coarse_passes;
+  double lock_alignment_px = pose::VisionOptions{}.lock_alignment_px;
   double gyro_correlation_s = pose::PoseFilterOptions{}.gyro_correlation_s;  // issue 19
   double acquiring_sigma_px = pose::VisionOptions{}.acquiring_sigma_px;  // issue 19
   double gyro_sigma_rad_s = pose::PoseFilterOptions{}.gyro_sigma_rad_s;
@@ -302,13 +310,20 @@ void Plot(const std::vector<Row>& all_rows, const std::string& path, double seco
   cv::imwrite(path, img);
 }
 
-int RunPose(const PoseBenchOptions& o) {
+// Figures of one row of one run, for the Monte Carlo summary.
+struct RowFigures {
+  double median_px = 0, p95_px = 0, nees_in_band = -1, nees_mean = 0, ms_per_frame = 0;
+  int nees_frames = 0;
+};
+
+int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figures = nullptr) {
   UseOneCore();
   absl::StatusOr<sim::Scenario> scenario = sim::LoadScenario(o.scenario);
   if (!scenario.ok()) {
     std::cerr << "ave-bench pose: " << scenario.status().message() << "\n";
     return 1;
   }
+  scenario->seed += static_cast<uint64_t>(o.seed);
   const scene::SyntheticCampus& world = scenario->world;
   const scene::CameraSpec* camera = world.FindCamera(o.camera);
   if (!camera || !camera->path) {
@@ -470,6 +485,9 @@ int RunPose(const PoseBenchOptions& o) {
     vo.max_features = run.features;
     vo.acquiring_sigma_px = o.acquiring_sigma_px;
     vo.acquisition_position_sigma_m = o.acquisition_sigma_m;
+    vo.acquisition_coarse_passes = o.acquisition_passes;
+    vo.lock_alignment_px = o.lock_alignment_px;
+    vo.acquisition_roll_search_deg = o.roll_search_deg;
     vo.acquisition_orientation_sigma_deg = o.acquisition_sigma_deg;
     vo.feature_bias_px = o.feature_bias_px;
     vo.feature_point_bias_px = o.feature_point_bias_px;
@@ -650,7 +668,7 @@ int RunPose(const PoseBenchOptions& o) {
   std::printf("| mode | features used/frame | median px | p95 px | max px | point matches <= 2 px | NEES in 95 %% band | keyframes | filter ms | detect ms | EKF + unknown ms | total ms/frame | max frame ms |\n");
   std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
   std::ostringstream json;
-  json << "{\"bench\":\"pose\",\"scenario\":\"" << o.scenario << "\",\"camera\":\"" << o.camera << "\",\"frames\":" << n;
+  json << "{\"bench\":\"pose\",\"scenario\":\"" << o.scenario << "\",\"camera\":\"" << o.camera << "\",\"seed\":" << o.seed << ",\"frames\":" << n;
   double default_nees_in_band = -1;
   for (const Row& r : rows) {
     const Spread s = SpreadOf(r.errors_px);
@@ -665,6 +683,7 @@ int RunPose(const PoseBenchOptions& o) {
                 s.p95, s.max, within.c_str(), nees, keyframes, r.filter_ms / frames, r.detect_ms / frames, r.update_ms / frames, r.TotalMs(),
                 max_frame_ms);
     if (r.key == "gps_imu_vision_50") default_nees_in_band = in_band;
+    if (figures) (*figures)[r.key] = {s.median, s.p95, in_band, r.nees_frames > 0 ? r.nees_sum / r.nees_frames : 0.0, r.TotalMs(), r.nees_frames};
     char buf[512];
     int len = std::snprintf(buf, sizeof(buf), ",\"%s\":{\"median_px\":%.3f,\"p95_px\":%.3f,\"max_px\":%.2f,\"update_ms\":%.4f,\"ms_per_frame\":%.3f",
                             r.key.c_str(), s.median, s.p95, s.max, r.update_ms / frames, r.TotalMs());
@@ -791,6 +810,71 @@ int RunPose(const PoseBenchOptions& o) {
   return 0;
 }
 
+// Monte Carlo over the scenario's noise (issue 19, sixth session): every figure above comes from
+// one draw of the GPS, inertial and camera noise, and the acquisition that draw happens to give.
+// The same rows on `seeds` draws (seed, seed + 1, ...), each run's own tables silenced, then one
+// table per row over the draws: how often the pose holds, and NEES pooled over all frames.
+int RunPoseSeeds(const PoseBenchOptions& o) {
+  PoseBenchOptions one = o;
+  one.seeds = 1;
+  one.png.clear();
+  one.nees_csv.clear();
+  one.landmark_csv.clear();
+  one.knobs = one.variants = one.consistency_knobs = false;
+  if (one.rows.empty()) one.rows = {"gps_imu_vision_50"};
+  std::vector<std::map<std::string, RowFigures>> runs;
+  for (int i = 0; i < o.seeds; ++i) {
+    one.seed = o.seed + i;
+    std::fprintf(stderr, "ave-bench pose: seed %d (%d of %d)\n", one.seed, i + 1, o.seeds);
+    std::fflush(stdout);
+    const int saved = dup(STDOUT_FILENO), null = open("/dev/null", O_WRONLY);
+    if (saved >= 0 && null >= 0) dup2(null, STDOUT_FILENO);
+    std::map<std::string, RowFigures> figures;
+    const int rc = RunPose(one, &figures);
+    std::fflush(stdout);
+    if (saved >= 0 && null >= 0) dup2(saved, STDOUT_FILENO);
+    if (null >= 0) close(null);
+    if (saved >= 0) close(saved);
+    if (rc != 0) return rc;
+    runs.push_back(std::move(figures));
+  }
+  std::printf("ave-bench pose: %s camera %s, %.1f s, Monte Carlo over %d draws of the noise (seeds %d-%d)\n", o.scenario.c_str(), o.camera.c_str(),
+              o.seconds, o.seeds, o.seed, o.seed + o.seeds - 1);
+  std::ostringstream json;
+  json << "{\"bench\":\"pose_seeds\",\"scenario\":\"" << o.scenario << "\",\"camera\":\"" << o.camera << "\",\"seed\":" << o.seed << ",\"seeds\":" << o.seeds;
+  for (const std::string& key : one.rows) {
+    std::printf("\n%s: per draw\n| seed | median px | p95 px | NEES in band | mean NEES | ms/frame |\n| ---: | ---: | ---: | ---: | ---: | ---: |\n", key.c_str());
+    std::vector<double> medians, p95s, ms;
+    double in_band_frames = 0, frames = 0;
+    int held = 0;  // draws whose median misregistration stays <= 1 px
+    for (size_t i = 0; i < runs.size(); ++i) {
+      const auto it = runs[i].find(key);
+      if (it == runs[i].end()) continue;
+      const RowFigures& f = it->second;
+      std::printf("| %d | %.2f | %.2f | %s | %.1f | %.2f |\n", o.seed + static_cast<int>(i), f.median_px, f.p95_px,
+                  f.nees_in_band >= 0 ? (std::to_string(static_cast<int>(std::lround(100 * f.nees_in_band))) + " %").c_str() : "-", f.nees_mean,
+                  f.ms_per_frame);
+      medians.push_back(f.median_px), p95s.push_back(f.p95_px), ms.push_back(f.ms_per_frame);
+      held += f.median_px <= 1.0;
+      if (f.nees_in_band >= 0) in_band_frames += f.nees_in_band * f.nees_frames, frames += f.nees_frames;
+    }
+    if (medians.empty()) continue;
+    const Spread m = SpreadOf(medians), p = SpreadOf(p95s), t = SpreadOf(ms);
+    const double pooled = frames > 0 ? in_band_frames / frames : -1;
+    std::printf("over the draws: median misregistration <= 1 px in %d of %zu; median px: median %.2f, p95 %.2f; p95 px: median %.2f;"
+                " NEES in band, all frames pooled: %.0f %%; ms/frame: median %.2f\n",
+                held, medians.size(), m.median, m.p95, p.median, 100 * pooled, t.median);
+    char buf[320];
+    std::snprintf(buf, sizeof(buf), ",\"%s\":{\"draws\":%zu,\"held_1px\":%d,\"median_px_median\":%.3f,\"median_px_p95\":%.3f,\"p95_px_median\":%.3f,"
+                  "\"nees_in_band_pooled\":%.3f,\"ms_per_frame_median\":%.3f}",
+                  key.c_str(), medians.size(), held, m.median, m.p95, p.median, pooled, t.median);
+    json << buf;
+  }
+  json << "}";
+  std::cout << json.str() << std::endl;
+  return 0;
+}
+
 }  // namespace
 
 Runner AddPoseBench(CLI::App& sub) {
@@ -852,6 +936,21 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--gps-correlation", o->gps_correlation_s, "seconds over which GPS errors (multipath) are correlated (0: white)")
       ->capture_default_str()
       ->check(ave::cli::Range(0, 1e6));
+  sub.add_option("--seed", o->seed, "added to the scenario's seed: another draw of the GPS, inertial and camera noise (0: the scenario's own)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0, 1000000));
+  sub.add_option("--seeds", o->seeds, "Monte Carlo: run the rows (default gps_imu_vision_50) on this many draws of the noise from --seed on, and summarise")
+      ->capture_default_str()
+      ->check(ave::cli::Range(1, 1000));
+  sub.add_option("--roll-search-deg", o->roll_search_deg, "the acquisition's chamfer search turns the image up to +-this (VisionOptions::acquisition_roll_search_deg; 0: shift only)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 30.0));
+  sub.add_option("--lock-alignment-px", o->lock_alignment_px, "a full matching counts towards the lock only when its coarse alignment moved the image by at most this, px (0: not checked)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 100.0));
+  sub.add_option("--acquisition-passes", o->acquisition_passes, "coarse passes while acquiring (VisionOptions::acquisition_coarse_passes)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(1, 10));
   sub.add_option("--gps-bias-sigma", o->gps_bias_sigma_m, "GPS multipath as a persisting bias of every fix, sigma per axis in m, a consider term (0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 100.0));
@@ -873,7 +972,7 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--landmark-csv", o->landmark_csv, "write every unknown feature that joins the state (joint rows), with what it sits on, to this CSV")
       ->check(ave::cli::WritableFile());
   sub.add_option("--png", o->png, "plot to write (empty: none)")->capture_default_str()->check(ave::cli::WritableFile());
-  return [o] { return RunPose(*o); };
+  return [o] { return o->seeds > 1 ? RunPoseSeeds(*o) : RunPose(*o); };
 }
 
 }  // namespace ave::bench
