@@ -223,6 +223,17 @@ void PoseEkf::InflatePose(double position_sigma_m, double orientation_sigma_rad)
   }
 }
 
+void PoseEkf::MovePosition(const Eigen::Vector3d& position, double sigma_m) {
+  if (!initialized_ || !position.allFinite() || !std::isfinite(sigma_m) || !(sigma_m > 0)) return;
+  p_ = position;
+  P_.block<3, kErrorDim>(kPos, 0).setZero();
+  P_.block<kErrorDim, 3>(0, kPos).setZero();
+  P_.block<3, 3>(kPos, kPos) = Eigen::Matrix3d::Identity() * (sigma_m * sigma_m);
+  if (cross_.cols() > 0) cross_.block(kPos, 0, 3, cross_.cols()).setZero();
+  gps_bias_sensitivity_.block<3, 3>(kPos, 0).setZero();
+  if (bias_sensitivity_.cols() > 0) bias_sensitivity_.block(kPos, 0, 3, bias_sensitivity_.cols()).setZero();
+}
+
 void PoseEkf::SetConsideredOrientation(const Eigen::Matrix3d& covariance) {
   if (!covariance.allFinite() || !covariance.isApprox(covariance.transpose(), 1e-9)) return;
   const Eigen::Matrix3d c = 0.5 * (covariance + covariance.transpose());

@@ -167,6 +167,11 @@ class PoseEkf {
   // filter is lost (e.g. vision has fitted badly for a while), so the next measurements may pull
   // it back instead of being gated. Negative or non-finite sigmas are ignored.
   void InflatePose(double position_sigma_m, double orientation_sigma_rad);
+  // Relocalisation (issue 19, sixth session): the caller found the camera elsewhere (vision's
+  // hypothesis search). The position becomes `position` with sigma_m per axis and no correlation
+  // with the rest of the state (velocity, orientation, landmarks and the consider terms keep theirs).
+  // Non-finite inputs or a sigma <= 0 change nothing.
+  void MovePosition(const Eigen::Vector3d& position, double sigma_m);
 
   // Consider covariance of the orientation (world rotation vector, rad²; issue 19, docs/POSE.md
   // "NEES by cause"): an error every measurement of the pose shares and that no update can remove,

@@ -356,3 +356,52 @@ TEST(PoseFilterOptions, CheckNamesTheBadField) {
 
 }  // namespace
 }  // namespace ave::pose
+
+namespace ave::pose {
+namespace {
+
+// Relocalisation (issue 19, sixth session): MovePosition sets the position and its covariance and
+// cuts its correlations; the rest of the state and the covariance's symmetry and definiteness stay.
+TEST(PoseEkf, MovePositionResetsThePositionAndItsCorrelationsOnly) {
+  const Rigid3d truth(SO3Exp(Eigen::Vector3d(0.1, -0.2, 0.3)), Eigen::Vector3d(5, -3, 1.7));
+  PoseEkf ekf = Filter(truth, 0.5, 2 * kDeg);
+  const PinholeIntrinsics k = Camera();
+  // Correlate position with orientation through point updates, with a landmark in the state.
+  for (int i = 0; i < 6; ++i) {
+    const Eigen::Vector3d p = truth * Eigen::Vector3d(-3 + i, 0.5 * (i % 3) - 0.5, 8 + i);
+    (void)ekf.UpdatePoint(k, p, *ProjectToPixel(k, truth.Inverse() * p) + Eigen::Vector2d(0.3, -0.2), 0, {{{i, 0.3}, {}}});
+  }
+  ASSERT_TRUE(ekf.AddLandmark(7, truth * Eigen::Vector3d(0, 0, 12), Eigen::Matrix3d::Identity()));
+  (void)ekf.UpdateLandmark(k, 7, *ProjectToPixel(k, Eigen::Vector3d(0, 0, 12)) + Eigen::Vector2d(0.2, 0.1), 1.0);
+  const StateMatrix& P0 = ekf.covariance();
+  ASSERT_GT(P0.block(kPos, kRot, 3, 3).cwiseAbs().maxCoeff(), 1e-8) << "the updates correlate position and orientation";
+  const Eigen::Quaterniond q = ekf.world_from_camera().rotation;
+  const StateMatrix before = ekf.covariance();
+
+  const Eigen::Vector3d moved(7.5, -1, 1.7);
+  ekf.MovePosition(moved, 0.5);
+  EXPECT_EQ(ekf.world_from_camera().translation, moved);
+  EXPECT_TRUE(ekf.world_from_camera().rotation.isApprox(q, 1e-15)) << "orientation kept";
+  const StateMatrix& P = ekf.covariance();
+  const Eigen::Matrix3d position_block = P.block(kPos, kPos, 3, 3);
+  EXPECT_TRUE(position_block.isApprox(0.25 * Eigen::Matrix3d::Identity()));
+  EXPECT_EQ(P.block(kPos, 3, 3, kErrorDim - 3).cwiseAbs().maxCoeff(), 0.0);
+  const Eigen::MatrixXd rest = P.block(3, 3, kErrorDim - 3, kErrorDim - 3), rest_before = before.block(3, 3, kErrorDim - 3, kErrorDim - 3);
+  EXPECT_EQ(rest, rest_before) << "the rest of the covariance kept";
+  EXPECT_TRUE(IsSpd(ekf.covariance()));
+  const Eigen::MatrixXd full = ekf.FullCovariance();
+  EXPECT_EQ(full.block(kPos, kErrorDim, 3, 3).cwiseAbs().maxCoeff(), 0.0) << "no position-landmark correlation";
+  EXPECT_EQ(Eigen::LLT<Eigen::MatrixXd>(0.5 * (full + full.transpose())).info(), Eigen::Success);
+  EXPECT_TRUE(ekf.PoseCovariance().allFinite());
+
+  // Bad input changes nothing.
+  const StateMatrix after = ekf.covariance();
+  ekf.MovePosition(Eigen::Vector3d(std::numeric_limits<double>::quiet_NaN(), 0, 0), 0.5);
+  ekf.MovePosition(Eigen::Vector3d(1, 2, 3), 0);
+  ekf.MovePosition(Eigen::Vector3d(1, 2, 3), std::numeric_limits<double>::infinity());
+  EXPECT_EQ(ekf.world_from_camera().translation, moved);
+  EXPECT_EQ(ekf.covariance(), after);
+}
+
+}  // namespace
+}  // namespace ave::pose

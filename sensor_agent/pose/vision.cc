@@ -87,6 +87,8 @@ std::string VisionOptions::Check() const {
     return "acquisition_roll_search_deg must be in [0, 30] and acquisition_roll_step_deg > 0";
   if (!(lock_alignment_px >= 0)) return "lock_alignment_px must be >= 0";
   if (acquisition_coarse_passes < 1) return "acquisition_coarse_passes must be >= 1";
+  if (!(relocalize_extent_m >= 0) || !(relocalize_step_m > 0) || !(relocalize_margin_px >= 0) || relocalize_extent_m > 20 * relocalize_step_m)
+    return "relocalize_extent_m must be in [0, 20 relocalize_step_m], relocalize_step_m > 0 and relocalize_margin_px >= 0";
   if (lost_frames < 0 || !(lost_orientation_sigma_deg >= 0)) return "lost_frames and lost_orientation_sigma_deg must be >= 0";
   if (!(tracked_sigma_px >= 0)) return "tracked_sigma_px must be >= 0";
   if (!(landmark_sigma_px >= 0)) return "landmark_sigma_px must be >= 0";
@@ -149,6 +151,7 @@ struct VisionTracker::Impl {
   std::vector<int> known_lines;     // line features matched on the last keyframe, followed by edge search
   int frames_since_keyframe = 0;
   bool acquired = false;       // the first vision frame has widened the GPS + AHRS prior (acquisition_*)
+  bool relocalize = true;      // the next keyframe searches positions around the filter's (first frame, lost)
   int good_full_matches = 0;  // consecutive full matchings that fitted well (lock_frames)
   int bad_full_matches = 0;   // ... and badly (lost_frames)
   int64_t next_track_id = 1;
@@ -193,6 +196,48 @@ struct VisionTracker::Impl {
   // Nothing of the model is seen just above the point (0.3 m).
   bool SkyAbove(const Eigen::Vector3d& camera_centre, const Eigen::Vector3d& p) const {
     return !bvh.Raycast(camera_centre, p + Eigen::Vector3d(0, 0, 0.3) - camera_centre, 1e-3).has_value();
+  }
+
+  // Relocalisation (VisionOptions::relocalize_extent_m): the chamfer alignment (shift and turn) of
+  // the model's edges from positions on a horizontal grid around the filter's; the filter moves to
+  // the best one when it fits clearly better than where it is. True when it moved.
+  bool Relocalize(PoseEkf& ekf, const cv::Mat& edge_distance, const cv::Mat& skyline_distance, double roll_search, double roll_step) {
+    const Eigen::Vector2d centre(k.cx, k.cy);
+    const Eigen::Vector3d here = ekf.world_from_camera().translation;
+    auto fit = [&](const Eigen::Vector3d& position) {
+      PoseEkf moved = ekf;
+      moved.MovePosition(position, options.relocalize_step_m);
+      std::vector<Eigen::Vector2d> samples, sky_samples;
+      EdgeSamples(moved, samples, sky_samples);
+      // (A 4 px first grid: the distance transform is smooth, truncated at 8 px.)
+      return ChamferAlign(edge_distance, samples, skyline_distance, sky_samples, options.search_radius_px, centre, roll_search, roll_step, 4).score_px;
+    };
+    const double at_here = fit(here);
+    double best = at_here;
+    Eigen::Vector3d best_position = here;
+    const int n = static_cast<int>(std::floor(options.relocalize_extent_m / options.relocalize_step_m + 1e-9));
+    for (int i = -n; i <= n; ++i) {
+      for (int j = -n; j <= n; ++j) {
+        if (i == 0 && j == 0) continue;
+        const Eigen::Vector3d position = here + options.relocalize_step_m * Eigen::Vector3d(i, j, 0);
+        const double score = fit(position);
+        if (score < best) best = score, best_position = position;
+      }
+    }
+    // Then half steps around the best.
+    const double half = 0.5 * options.relocalize_step_m;
+    const Eigen::Vector3d coarse = best_position;
+    for (int i = -1; i <= 1; ++i) {
+      for (int j = -1; j <= 1; ++j) {
+        if (i == 0 && j == 0) continue;
+        const Eigen::Vector3d position = coarse + half * Eigen::Vector3d(i, j, 0);
+        const double score = fit(position);
+        if (score < best) best = score, best_position = position;
+      }
+    }
+    if (!(best < at_here - options.relocalize_margin_px)) return false;
+    ekf.MovePosition(best_position, half);
+    return true;
   }
 
   // Starts a fresh cache when the camera moved beyond options.visibility_cache_m (or caching is off).
@@ -608,21 +653,26 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
     // Coarse pass on a copy of the filter: the image offset that lays the predicted model edges on
     // the frame's edges (chamfer), then points matched within a few pixels of prediction + offset;
     // the copy's updated pose re-predicts everything for the fine pass.
+    cv::Mat edge_distance, skyline_distance;
+    EdgeDistances(gray, edge_distance, skyline_distance);
+    timer.Lap(kStageEdges);
+    const Eigen::Vector2d centre(m.k.cx, m.k.cy);
+    const double roll_search = m.options.acquisition_roll_search_deg * kDegToRad, roll_step = m.options.acquisition_roll_step_deg * kDegToRad;
+    if (m.relocalize && m.options.relocalize_extent_m > 0) {
+      m.relocalize = false;
+      stats.relocalized = m.Relocalize(ekf, edge_distance, skyline_distance, roll_search, roll_step);
+      timer.Lap(kStageChamfer);
+    }
     predicted = m.PredictPoints(ekf);
     stats.points_predicted = static_cast<int>(predicted.size());
     std::vector<Eigen::Vector2d> samples, sky_samples;
     m.EdgeSamples(ekf, samples, sky_samples);
     timer.Lap(kStageVisibility);
-    cv::Mat edge_distance, skyline_distance;
-    EdgeDistances(gray, edge_distance, skyline_distance);
-    timer.Lap(kStageEdges);
     // Until the lock holds (and when it weakens) the search turns the image too: the AHRS's roll
     // error is not a shift.
     const bool turn = m.good_full_matches < m.options.lock_frames || stats.weak_lock;
-    const Eigen::Vector2d centre(m.k.cx, m.k.cy);
     const ImageAlignment alignment =
-        ChamferAlign(edge_distance, samples, skyline_distance, sky_samples, m.options.search_radius_px, centre,
-                     turn ? m.options.acquisition_roll_search_deg * kDegToRad : 0.0, m.options.acquisition_roll_step_deg * kDegToRad);
+        ChamferAlign(edge_distance, samples, skyline_distance, sky_samples, m.options.search_radius_px, centre, turn ? roll_search : 0.0, roll_step);
     stats.coarse_offset_px = alignment.offset;
     stats.coarse_rotation_rad = alignment.rotation_rad;
     timer.Lap(kStageChamfer);
@@ -702,6 +752,7 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
     if (m.options.lost_frames > 0 && m.bad_full_matches >= m.options.lost_frames) {
       ekf.InflatePose(0.5, m.options.lost_orientation_sigma_deg * 3.14159265358979323846 / 180);
       m.bad_full_matches = 0;
+      m.relocalize = true;
       ++stats.relocks;
     }
     timer.Lap(kStageEkf);

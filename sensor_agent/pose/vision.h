@@ -120,6 +120,7 @@ struct VisionOptions {
   // the pose covariance is widened by these sigmas. Off (0) by default: 1 m / 1 deg left the
   // first frames out of the 95 % band all the same (docs/POSE.md, "Gyro bias").
   double acquisition_position_sigma_m = 0;
+  double acquisition_orientation_sigma_deg = 0;
   // Until the lock holds and on weak-lock keyframes, the coarse chamfer search also turns the image
   // about the principal point, up to +-this in steps of acquisition_roll_step_deg (issue 19, sixth
   // session: an AHRS roll error of 1.5 deg moves the image edges 8 px, beyond the coarse match
@@ -128,12 +129,22 @@ struct VisionOptions {
   double acquisition_roll_step_deg = 0.5;
   // A full matching counts towards the lock (lock_frames) only when its coarse alignment moved the
   // image by at most this (px) and turned it by at most one acquisition_roll_step_deg; otherwise
-  // towards lost_frames. A lock formed from a prediction the chamfer search had to
-  // move holds the wrong corners (issue 19, sixth session: 7 of 13 noise draws of the campus run
-  // locked 2-20 px off without this). 0: not checked.
+  // towards lost_frames. A lock formed from a prediction the chamfer search had to move holds the
+  // wrong corners (issue 19, sixth session). 0: not checked.
   double lock_alignment_px = 3;
-  int acquisition_coarse_passes = 1;  // coarse passes (match, update a copy) while acquiring: 1 = one, as on locked keyframes
-  double acquisition_orientation_sigma_deg = 0;
+  // Coarse passes (match, update a copy) while acquiring: 1 = one, as on locked keyframes; more
+  // re-match from the pose the last pass pulled (tried, not better: docs/POSE.md).
+  int acquisition_coarse_passes = 1;
+  // Relocalisation (issue 19, sixth session): on the first vision frame, and when the pose is
+  // declared lost (lost_frames), the model's edges are aligned (ChamferAlign: shift and turn) from
+  // positions on a horizontal grid of +-relocalize_extent_m in steps of relocalize_step_m, then half
+  // steps around the best; the filter moves there (PoseEkf::MovePosition, sigma half a step) when
+  // its chamfer score beats the filter's own position by relocalize_margin_px. GPS multipath near
+  // buildings is 1-4 m in the campus run, and no image shift or turn undoes the parallax it leaves
+  // on near façades, so the first matches took wrong corners that then held the pose. 0: off.
+  double relocalize_extent_m = 3;
+  double relocalize_step_m = 1;
+  double relocalize_margin_px = 0.5;
   // Persisting detection bias of the known features (issue 19, docs/POSE.md "NEES by cause"): a
   // rendered or real building corner is found 0.2-0.4 px off its model point the same way at every
   // keyframe and along every track, so no number of sightings averages it away, and the
@@ -227,6 +238,7 @@ struct VisionFrameStats {
   double reported_scale = 1;  // the reported covariance's scale after this frame (VisionOptions::nis_short_gain)
   bool weak_lock = false;    // ... because the tracked known features disagreed with the prediction
   int relocks = 0;           // the pose was declared lost (lost_frames) and its covariance inflated
+  bool relocalized = false;  // the position search moved the filter (relocalize_extent_m)
   int known_tracked = 0;     // known features followed by KLT into this frame
   // Why measurements did not update the pose (counted per feature).
   int rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0;

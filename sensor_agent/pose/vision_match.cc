@@ -41,7 +41,7 @@ int Nearest(const std::vector<cv::Point2f>& corners, const Eigen::Vector2d& uv, 
 // Façades repeat horizontal edges (window rows) every few pixels, so the skyline term (model edges
 // with sky above them against the frame's first edge from the top) breaks the tie.
 Eigen::Vector2d ChamferOffset(const cv::Mat& edge_distance, const std::vector<Eigen::Vector2d>& samples, const cv::Mat& skyline_distance,
-                              const std::vector<Eigen::Vector2d>& sky_samples, double radius) {
+                              const std::vector<Eigen::Vector2d>& sky_samples, double radius, int coarse_step) {
   if (samples.size() < 10) return Eigen::Vector2d::Zero();
   const bool use_sky = sky_samples.size() >= 5;
   auto score = [&](int dx, int dy) {
@@ -50,8 +50,8 @@ Eigen::Vector2d ChamferOffset(const cv::Mat& edge_distance, const std::vector<Ei
   const int r = static_cast<int>(radius);
   int best_x = 0, best_y = 0;
   double best = score(0, 0);
-  for (int step : {2, 1}) {
-    const int cx = best_x, cy = best_y, reach = step == 2 ? r : 2;
+  for (int step = std::max(1, coarse_step); step >= 1; step /= 2) {
+    const int cx = best_x, cy = best_y, reach = step == std::max(1, coarse_step) ? r : 2 * step;
     for (int dy = cy - reach; dy <= cy + reach; dy += step) {
       for (int dx = cx - reach; dx <= cx + reach; dx += step) {
         const double v = score(dx, dy);
@@ -68,9 +68,9 @@ Eigen::Vector2d ChamferOffset(const cv::Mat& edge_distance, const std::vector<Ei
 
 ImageAlignment ChamferAlign(const cv::Mat& edge_distance, const std::vector<Eigen::Vector2d>& samples, const cv::Mat& skyline_distance,
                             const std::vector<Eigen::Vector2d>& sky_samples, double radius, const Eigen::Vector2d& centre,
-                            double max_rotation_rad, double rotation_step_rad) {
+                            double max_rotation_rad, double rotation_step_rad, int coarse_step) {
   ImageAlignment best;
-  best.offset = ChamferOffset(edge_distance, samples, skyline_distance, sky_samples, radius);
+  best.offset = ChamferOffset(edge_distance, samples, skyline_distance, sky_samples, radius, coarse_step);
   if (samples.size() < 10) return best;
   const bool use_sky = sky_samples.size() >= 5;
   auto score = [&](const std::vector<Eigen::Vector2d>& edge, const std::vector<Eigen::Vector2d>& sky, int dx, int dy) {

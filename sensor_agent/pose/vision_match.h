@@ -32,9 +32,10 @@ int Nearest(const std::vector<cv::Point2f>& corners, const Eigen::Vector2d& uv, 
 
 // The image offset (within `radius`) that best lays the sampled model-edge pixels on the frame's
 // edges (chamfer: mean distance, truncated, from the distance transform) plus the skyline samples
-// on the frame's skyline; a 2 px grid over the window, then 1 px around the best.
+// on the frame's skyline; a `coarse_step` px grid over the window, then halved steps around the best
+// down to 1 px.
 Eigen::Vector2d ChamferOffset(const cv::Mat& edge_distance, const std::vector<Eigen::Vector2d>& samples, const cv::Mat& skyline_distance,
-                              const std::vector<Eigen::Vector2d>& sky_samples, double radius);
+                              const std::vector<Eigen::Vector2d>& sky_samples, double radius, int coarse_step = 2);
 
 // The image motion that best lays the model edges on the frame's: an offset (px) and a rotation
 // about `centre` (the principal point; rad, positive turns +u towards +v). A camera rolled by r
@@ -56,7 +57,7 @@ struct ImageAlignment {
 // the coarse match radius, so a translation alone leaves roll to the few central corners).
 ImageAlignment ChamferAlign(const cv::Mat& edge_distance, const std::vector<Eigen::Vector2d>& samples, const cv::Mat& skyline_distance,
                             const std::vector<Eigen::Vector2d>& sky_samples, double radius, const Eigen::Vector2d& centre,
-                            double max_rotation_rad, double rotation_step_rad);
+                            double max_rotation_rad, double rotation_step_rad, int coarse_step = 2);
 
 // Distance transforms of the Canny edges and of the skyline (in each column, the first edge pixel
 // from the top) of a grey frame.

@@ -146,6 +146,34 @@ TEST_F(VisionTest, BothSegmentDetectorsMatchTheModelLinesAndStabiliseThePose) {
   }
 }
 
+// Issue 19, sixth session: GPS multipath near buildings leaves the first pose metres off with a
+// confident covariance; no image shift or turn undoes the parallax, and the first matches would
+// take wrong corners. The relocalisation's position search finds the camera on the first frame.
+TEST_F(VisionTest, RelocalisationFindsACameraMetresFromItsGpsPosition) {
+  const scene::CameraSpec& camera = *scenario_->world.FindCamera("backpack");
+  const sim::SimulatedCamera sim_camera(scenario_->world, camera, scenario_->EffectsForCamera("backpack"), scenario_->seed);
+  const sim::SimImage frame = sim_camera.Frame(120, 4.0);
+  const Rigid3d truth = sim_camera.PoseAt(4.0);
+  const Rigid3d start(SO3Exp(Eigen::Vector3d(0.2 * kDeg, 0.3 * kDeg, -0.2 * kDeg)) * truth.rotation, truth.translation + Eigen::Vector3d(2.3, -1.6, 0));
+  auto run = [&](double extent_m) {
+    VisionOptions options;
+    options.relocalize_extent_m = extent_m;
+    VisionTracker vision(CampusFeatureMap(scenario_->world), scene::BuildStaticMesh(scenario_->world, 2.0), camera.intrinsics, options);
+    PoseEkf ekf;
+    ekf.Initialize(0, start, 0.3, 1 * kDeg);
+    const VisionFrameStats stats = vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
+    return std::make_tuple(stats.relocalized, (ekf.world_from_camera().translation - truth.translation).head<2>().norm(),
+                           MedianMisregistration(camera.intrinsics, truth, ekf.world_from_camera(), vision.VisiblePoints(truth)));
+  };
+  const auto [moved, error_m, px] = run(VisionOptions().relocalize_extent_m);
+  EXPECT_TRUE(moved);
+  EXPECT_LT(error_m, 0.8);
+  EXPECT_LT(px, 2.0);
+  const auto [moved_off, error_off_m, px_off] = run(0);
+  EXPECT_FALSE(moved_off);
+  EXPECT_GT(px_off, 2 * px) << "without the search the first frame stays off (" << error_off_m << " m)";
+}
+
 // Issue 19: between keyframes the known features follow by KLT from the predicted pose and keep
 // the pose registered; a frame without features changes nothing; a frame bumped by 5° (its
 // matches all disagree with the prediction) does not pull the pose, and the next frame re-locks.

@@ -67,6 +67,7 @@ struct PoseBenchOptions {
   double roll_search_deg = pose::VisionOptions{}.acquisition_roll_search_deg;  // issue 19, sixth session
   int acquisition_passes = pose::VisionOptions{}.acquisition_coarse_passes;
   double lock_alignment_px = pose::VisionOptions{}.lock_alignment_px;
+  double relocalize_extent_m = pose::VisionOptions{}.relocalize_extent_m;
   double gyro_correlation_s = pose::PoseFilterOptions{}.gyro_correlation_s;  // issue 19
   double acquiring_sigma_px = pose::VisionOptions{}.acquiring_sigma_px;  // issue 19
   double gyro_sigma_rad_s = pose::PoseFilterOptions{}.gyro_sigma_rad_s;
@@ -487,6 +488,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.acquisition_position_sigma_m = o.acquisition_sigma_m;
     vo.acquisition_coarse_passes = o.acquisition_passes;
     vo.lock_alignment_px = o.lock_alignment_px;
+    vo.relocalize_extent_m = o.relocalize_extent_m;
     vo.acquisition_roll_search_deg = o.roll_search_deg;
     vo.acquisition_orientation_sigma_deg = o.acquisition_sigma_deg;
     vo.feature_bias_px = o.feature_bias_px;
@@ -948,6 +950,9 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--lock-alignment-px", o->lock_alignment_px, "a full matching counts towards the lock only when its coarse alignment moved the image by at most this, px (0: not checked)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 100.0));
+  sub.add_option("--relocalize-m", o->relocalize_extent_m, "relocalisation: horizontal grid half-extent around the filter's position, m (VisionOptions::relocalize_extent_m; 0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 20.0));
   sub.add_option("--acquisition-passes", o->acquisition_passes, "coarse passes while acquiring (VisionOptions::acquisition_coarse_passes)")
       ->capture_default_str()
       ->check(ave::cli::Range(1, 10));
