@@ -174,6 +174,27 @@ TEST_F(VisionTest, RelocalisationFindsACameraMetresFromItsGpsPosition) {
   EXPECT_GT(px_off, 2 * px) << "without the search the first frame stays off (" << error_off_m << " m)";
 }
 
+// Issue 19, sixth session: a keyframe on which the model's outline lies nowhere (here the frame
+// upside down) applies nothing, and says so; the pose keeps its prediction. With relocalisation on,
+// the search does not move the filter to such a fit either.
+TEST_F(VisionTest, AFrameTheModelFitsNowhereAppliesNothing) {
+  const scene::CameraSpec& camera = *scenario_->world.FindCamera("backpack");
+  const sim::SimulatedCamera sim_camera(scenario_->world, camera, scenario_->EffectsForCamera("backpack"), scenario_->seed);
+  sim::SimImage elsewhere = sim_camera.Frame(120, 4.0);
+  const Rigid3d truth = sim_camera.PoseAt(4.0);
+  cv::Mat image(elsewhere.height, elsewhere.width, CV_8UC3, elsewhere.bgr.data());
+  cv::flip(image.clone(), image, -1);
+  VisionTracker vision(CampusFeatureMap(scenario_->world), scene::BuildStaticMesh(scenario_->world, 2.0), camera.intrinsics, VisionOptions());
+  PoseEkf ekf;
+  ekf.Initialize(0, truth, 0.3, 1 * kDeg);
+  const VisionFrameStats stats = vision.Update(elsewhere.bgr.data(), elsewhere.width, elsewhere.height, ekf);
+  EXPECT_TRUE(stats.unfit);
+  EXPECT_FALSE(stats.relocalized);
+  EXPECT_EQ(stats.features_used(), 0);
+  EXPECT_LT((ekf.world_from_camera().translation - truth.translation).norm(), 1e-9);
+  EXPECT_TRUE(ekf.covariance().allFinite());
+}
+
 // Issue 19: between keyframes the known features follow by KLT from the predicted pose and keep
 // the pose registered; a frame without features changes nothing; a frame bumped by 5° (its
 // matches all disagree with the prediction) does not pull the pose, and the next frame re-locks.

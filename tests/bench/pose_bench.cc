@@ -67,7 +67,9 @@ struct PoseBenchOptions {
   double roll_search_deg = pose::VisionOptions{}.acquisition_roll_search_deg;  // issue 19, sixth session
   int acquisition_passes = pose::VisionOptions{}.acquisition_coarse_passes;
   double lock_alignment_px = pose::VisionOptions{}.lock_alignment_px;
+  double max_alignment_score_px = pose::VisionOptions{}.max_alignment_score_px;
   double relocalize_extent_m = pose::VisionOptions{}.relocalize_extent_m;
+  double relocalize_step_m = pose::VisionOptions{}.relocalize_step_m;
   double gyro_correlation_s = pose::PoseFilterOptions{}.gyro_correlation_s;  // issue 19
   double acquiring_sigma_px = pose::VisionOptions{}.acquiring_sigma_px;  // issue 19
   double gyro_sigma_rad_s = pose::PoseFilterOptions{}.gyro_sigma_rad_s;
@@ -126,7 +128,7 @@ struct Row {
   // (issue 19: are the vision measurements biased?).
   std::array<std::array<std::array<double, 3>, 2>, 2> residual_sum{};  // (sum u, sum v, count)
   std::array<double, pose::kVisionStageCount> stage_ms{};
-  int keyframes = 0, weak_locks = 0, relocks = 0;
+  int keyframes = 0, weak_locks = 0, relocks = 0, unfit = 0, relocalized = 0;
   int64_t rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0, klt_lost = 0, unknown_dropped = 0;
   int nees_frames = 0, nees_in_band = 0, nees_below = 0, nees_above = 0;
   // Unknown features joining the state (joint mode), against the static mesh's point on the true
@@ -488,7 +490,9 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.acquisition_position_sigma_m = o.acquisition_sigma_m;
     vo.acquisition_coarse_passes = o.acquisition_passes;
     vo.lock_alignment_px = o.lock_alignment_px;
+    vo.max_alignment_score_px = o.max_alignment_score_px;
     vo.relocalize_extent_m = o.relocalize_extent_m;
+    vo.relocalize_step_m = o.relocalize_step_m;
     vo.acquisition_roll_search_deg = o.roll_search_deg;
     vo.acquisition_orientation_sigma_deg = o.acquisition_sigma_deg;
     vo.feature_bias_px = o.feature_bias_px;
@@ -533,6 +537,8 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
         frame_nis = s.nis;
         frame_scale = s.reported_scale;
         row.weak_locks += s.weak_lock;
+        row.unfit += s.unfit;
+        row.relocalized += s.relocalized;
         row.relocks += s.relocks;
         row.rejected_gate += s.rejected_gate, row.rejected_behind += s.rejected_behind, row.rejected_not_finite += s.rejected_not_finite;
         row.klt_lost += s.klt_lost, row.unknown_dropped += s.unknown_dropped;
@@ -721,13 +727,13 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     for (const Row* r : staged) std::printf(" **%.2f** |", r->TotalMs());
     std::printf("\n");
   }
-  std::printf("\nrejections over the run (features not applied, by reason):\n| mode | outside the gate | behind the camera | not finite | KLT lost | unknown features dropped (gate) | weak-lock keyframes | declared lost |\n");
-  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+  std::printf("\nrejections over the run (features not applied, by reason):\n| mode | outside the gate | behind the camera | not finite | KLT lost | unknown features dropped (gate) | weak-lock keyframes | declared lost | keyframes the model fits nowhere | relocalised |\n");
+  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
   for (const Row& r : rows) {
     if (r.features == 0 || r.mode != "gps-imu-vision") continue;
-    std::printf("| %s | %lld | %lld | %lld | %lld | %lld | %d | %d |\n", RowName(r).c_str(), static_cast<long long>(r.rejected_gate),
+    std::printf("| %s | %lld | %lld | %lld | %lld | %lld | %d | %d | %d | %d |\n", RowName(r).c_str(), static_cast<long long>(r.rejected_gate),
                 static_cast<long long>(r.rejected_behind), static_cast<long long>(r.rejected_not_finite), static_cast<long long>(r.klt_lost),
-                static_cast<long long>(r.unknown_dropped), r.weak_locks, r.relocks);
+                static_cast<long long>(r.unknown_dropped), r.weak_locks, r.relocks, r.unfit, r.relocalized);
   }
   std::printf("\nNEES of the pose per frame against the chi2(6) 95 %% band [%.2f, %.2f] (below: the covariance is too large; above: too small),"
               " and unknown features joining the state vs the static mesh's point on the true ray:\n"
@@ -953,6 +959,12 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--relocalize-m", o->relocalize_extent_m, "relocalisation: horizontal grid half-extent around the filter's position, m (VisionOptions::relocalize_extent_m; 0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 20.0));
+  sub.add_option("--relocalize-step-m", o->relocalize_step_m, "relocalisation: the grid's first step, then halved to 0.5 m around the best (VisionOptions::relocalize_step_m)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.05, 20.0));
+  sub.add_option("--max-alignment-score-px", o->max_alignment_score_px, "a keyframe whose chamfer alignment scores worse than this applies nothing (VisionOptions::max_alignment_score_px; 0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 100.0));
   sub.add_option("--acquisition-passes", o->acquisition_passes, "coarse passes while acquiring (VisionOptions::acquisition_coarse_passes)")
       ->capture_default_str()
       ->check(ave::cli::Range(1, 10));
