@@ -61,6 +61,9 @@ struct PoseBenchOptions {
   double ahrs_correlation_s = 1.0;  // PoseFilterOptions::orientation_correlation_s
   double gps_correlation_s = pose::PoseFilterOptions{}.gps_correlation_s;  // issue 19 (pose19e)
   double gps_min_sigma_m = pose::PoseFilterOptions{}.gps_min_sigma_m;
+  double gate_chi2_2dof = pose::PoseFilterOptions{}.gate_chi2_2dof;  // issue 19, seventh session
+  double pixel_sigma_px = pose::PoseFilterOptions{}.pixel_sigma_px;
+  double tracked_sigma_px = pose::VisionOptions{}.tracked_sigma_px;
   double gps_bias_sigma_m = pose::PoseFilterOptions{}.gps_bias_sigma_m;  // issue 19: multipath as a consider bias
   int seed = 0;  // added to the scenario's seed: another draw of every noise (GPS, IMU, camera)
   int seeds = 1;  // > 1: Monte Carlo over seeds seed .. seed + seeds - 1 (RunPoseSeeds)
@@ -91,6 +94,7 @@ struct PoseBenchOptions {
   // > 0: every frame JPEG-encoded at this quality and decoded before the pose sees it, as the
   // agent's pre-rendered footage delivers frames (issue 19, session rate19); 0: the render as is.
   int footage_jpeg_quality = 0;
+  std::string match_csv;     // every known-point match of every frame against its true projection (issue 19, seventh session)
   std::string landmark_csv;  // every unknown feature that joined the state, with what it sits on (issue 19, session pose19j)
 };
 
@@ -127,6 +131,14 @@ struct Row {
   // Signed match residuals (observed - true projection, px; |r| <= 3 px) summed per kind: [keyframe/tracked][foot/eaves]
   // (issue 19: are the vision measurements biased?).
   std::array<std::array<std::array<double, 3>, 2>, 2> residual_sum{};  // (sum u, sum v, count)
+  // Per known point (its model position): its matches' residuals within 3 px, to split each
+  // point's error into the part that persists over its sightings (the point's mean) and the part
+  // that varies (issue 19, seventh session: what VisionOptions::feature_point_bias_px stands for).
+  struct PointResiduals {
+    double n = 0, u = 0, v = 0, uu = 0, vv = 0, depth = 0;
+  };
+  std::map<std::tuple<double, double, double>, PointResiduals> point_residuals;
+  int matches_beyond_3px = 0;
   std::array<double, pose::kVisionStageCount> stage_ms{};
   int keyframes = 0, weak_locks = 0, relocks = 0, unfit = 0, relocalized = 0;
   int64_t rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0, klt_lost = 0, unknown_dropped = 0;
@@ -316,7 +328,7 @@ void Plot(const std::vector<Row>& all_rows, const std::string& path, double seco
 // Figures of one row of one run, for the Monte Carlo summary.
 struct RowFigures {
   double median_px = 0, p95_px = 0, nees_in_band = -1, nees_mean = 0, ms_per_frame = 0;
-  int nees_frames = 0;
+  int nees_frames = 0, nees_below = 0, nees_above = 0;
 };
 
 int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figures = nullptr) {
@@ -382,6 +394,8 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
   std::FILE* nees_csv = o.nees_csv.empty() ? nullptr : std::fopen(o.nees_csv.c_str(), "w");
   std::FILE* landmark_csv = o.landmark_csv.empty() ? nullptr : std::fopen(o.landmark_csv.c_str(), "w");
   if (landmark_csv) std::fprintf(landmark_csv, "row,t_s,id,on,observations,depth_m,true_depth_m,depth_sigma_m,u,v\n");
+  std::FILE* match_csv = o.match_csv.empty() ? nullptr : std::fopen(o.match_csv.c_str(), "w");
+  if (match_csv) std::fprintf(match_csv, "row,t_s,keyframe,x,y,z,depth_m,u,v,true_u,true_v\n");
   if (nees_csv) {
     std::fprintf(nees_csv, "row,t_s,keyframe,nees,nees_pos,nees_rot,dx,sx,dy,sy,dz,sz,dpitch,spitch,dyaw,syaw,droll,sroll,median_px,nis,reported_scale\n");
   }
@@ -478,6 +492,8 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     fo.gyro_correlation_s = o.gyro_correlation_s;
     fo.gps_correlation_s = o.gps_correlation_s;
     fo.gps_min_sigma_m = o.gps_min_sigma_m;
+    fo.gate_chi2_2dof = o.gate_chi2_2dof;
+    fo.pixel_sigma_px = o.pixel_sigma_px;
     fo.gps_bias_sigma_m = o.gps_bias_sigma_m;
     fo.gyro_sigma_rad_s = o.gyro_sigma_rad_s;
     fo.estimate_gyro_bias = o.gyro_bias;
@@ -490,6 +506,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.acquisition_position_sigma_m = o.acquisition_sigma_m;
     vo.acquisition_coarse_passes = o.acquisition_passes;
     vo.lock_alignment_px = o.lock_alignment_px;
+    vo.tracked_sigma_px = o.tracked_sigma_px;
     vo.max_alignment_score_px = o.max_alignment_score_px;
     vo.relocalize_extent_m = o.relocalize_extent_m;
     vo.relocalize_step_m = o.relocalize_step_m;
@@ -572,9 +589,17 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
         for (const auto& [p, uv] : s.point_matches) {
           const auto true_uv = ProjectToPixel(k, frame_truth.Inverse() * p, 0.1);
           ++row.matches;
+          if (match_csv && true_uv)
+            std::fprintf(match_csv, "%s,%.4f,%d,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f,%.3f\n", run.key.c_str(), t_s, s.keyframe ? 1 : 0, p.x(), p.y(), p.z(),
+                         (frame_truth.Inverse() * p).z(), uv.x(), uv.y(), true_uv->x(), true_uv->y());
           row.matches_within_2px += true_uv && (*true_uv - uv).norm() <= 2.0;
           if (true_uv) (s.keyframe ? row.match_error_key_px : row.match_error_tracked_px).push_back((*true_uv - uv).norm());
+          row.matches_beyond_3px += true_uv && (uv - *true_uv).norm() > 3.0;
           if (true_uv && (uv - *true_uv).norm() <= 3.0) {
+            Row::PointResiduals& pr = row.point_residuals[{p.x(), p.y(), p.z()}];
+            const Eigen::Vector2d d = uv - *true_uv;
+            pr.n += 1, pr.u += d.x(), pr.v += d.y(), pr.uu += d.x() * d.x(), pr.vv += d.y() * d.y();
+            pr.depth += (frame_truth.Inverse() * p).z();
             const bool eaves = p.z() > frame_truth.translation.z();
             std::array<double, 3>& sum = row.residual_sum[s.keyframe ? 0 : 1][eaves ? 1 : 0];
             sum[0] += (uv - *true_uv).x(), sum[1] += (uv - *true_uv).y(), sum[2] += 1;
@@ -691,7 +716,8 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
                 s.p95, s.max, within.c_str(), nees, keyframes, r.filter_ms / frames, r.detect_ms / frames, r.update_ms / frames, r.TotalMs(),
                 max_frame_ms);
     if (r.key == "gps_imu_vision_50") default_nees_in_band = in_band;
-    if (figures) (*figures)[r.key] = {s.median, s.p95, in_band, r.nees_frames > 0 ? r.nees_sum / r.nees_frames : 0.0, r.TotalMs(), r.nees_frames};
+    if (figures) (*figures)[r.key] = {s.median, s.p95, in_band, r.nees_frames > 0 ? r.nees_sum / r.nees_frames : 0.0, r.TotalMs(), r.nees_frames,
+                                          r.nees_below, r.nees_above};
     char buf[512];
     int len = std::snprintf(buf, sizeof(buf), ",\"%s\":{\"median_px\":%.3f,\"p95_px\":%.3f,\"max_px\":%.2f,\"update_ms\":%.4f,\"ms_per_frame\":%.3f",
                             r.key.c_str(), s.median, s.p95, s.max, r.update_ms / frames, r.TotalMs());
@@ -776,6 +802,30 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
       }
     std::printf("\n");
   }
+  std::printf("\nknown-point match errors by the point's depth (matches within 3 px of the truth): RMS per axis of each point's mean error"
+              " (persists over its sightings) and of the rest (varies), sightings-weighted; and the share of matches beyond 3 px\n"
+              "| mode | depth | points | sightings | persisting px | varying px |\n| --- | --- | ---: | ---: | ---: | ---: |\n");
+  for (const Row& r : rows) {
+    if (r.features == 0 || r.mode != "gps-imu-vision" || r.point_residuals.empty()) continue;
+    constexpr std::array<double, 4> kBands = {0, 60, 120, 1e9};
+    for (size_t b = 0; b + 1 < kBands.size(); ++b) {
+      double points = 0, n = 0, persisting = 0, varying = 0;
+      for (const auto& [key, q] : r.point_residuals) {
+        if (q.n < 10 || q.depth / q.n < kBands[b] || q.depth / q.n >= kBands[b + 1]) continue;  // ten sightings for a mean
+        const double mu = q.u / q.n, mv = q.v / q.n;
+        points += 1, n += q.n;
+        persisting += q.n * (mu * mu + mv * mv) / 2;
+        varying += (q.uu - q.n * mu * mu + q.vv - q.n * mv * mv) / 2;
+      }
+      if (n == 0) continue;
+      std::printf("| %s | %s | %.0f | %.0f | %.2f | %.2f |\n", RowName(r).c_str(),
+                  b + 2 < kBands.size() ? (std::to_string(static_cast<int>(kBands[b])) + "-" + std::to_string(static_cast<int>(kBands[b + 1])) + " m").c_str()
+                                        : (std::to_string(static_cast<int>(kBands[b])) + " m and more").c_str(),
+                  points, n, std::sqrt(persisting / n), std::sqrt(varying / n));
+    }
+    std::printf("| %s | matches beyond 3 px | | %d of %d | %.1f %% | |\n", RowName(r).c_str(), r.matches_beyond_3px, r.matches,
+                100.0 * r.matches_beyond_3px / std::max(1, r.matches));
+  }
   std::printf("\nscenario variants, misregistration median px (p95) in the windows around the event:\n| variant | 1 s before | during | 1 s after |\n| --- | ---: | ---: | ---: |\n");
   for (const Row& r : rows) {
     if (!r.event) continue;
@@ -813,6 +863,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
   json << buf << ",\"ekf_update_50_features_ms\":" << ekf50_ms << ",\"render_ms\":" << render_ms << ",\"png\":\"" << o.png << "\"}";
   if (nees_csv) std::fclose(nees_csv);
   if (landmark_csv) std::fclose(landmark_csv);
+  if (match_csv) std::fclose(match_csv);
   if (!o.png.empty()) Plot(rows, o.png, o.seconds);
   std::cout << json.str() << std::endl;
   return 0;
@@ -828,6 +879,7 @@ int RunPoseSeeds(const PoseBenchOptions& o) {
   one.png.clear();
   one.nees_csv.clear();
   one.landmark_csv.clear();
+  one.match_csv.clear();
   one.knobs = one.variants = one.consistency_knobs = false;
   if (one.rows.empty()) one.rows = {"gps_imu_vision_50"};
   std::vector<std::map<std::string, RowFigures>> runs;
@@ -853,7 +905,7 @@ int RunPoseSeeds(const PoseBenchOptions& o) {
   for (const std::string& key : one.rows) {
     std::printf("\n%s: per draw\n| seed | median px | p95 px | NEES in band | mean NEES | ms/frame |\n| ---: | ---: | ---: | ---: | ---: | ---: |\n", key.c_str());
     std::vector<double> medians, p95s, ms;
-    double in_band_frames = 0, frames = 0;
+    double in_band_frames = 0, frames = 0, below = 0, above = 0;
     int held = 0;  // draws whose median misregistration stays <= 1 px
     for (size_t i = 0; i < runs.size(); ++i) {
       const auto it = runs[i].find(key);
@@ -864,18 +916,20 @@ int RunPoseSeeds(const PoseBenchOptions& o) {
                   f.ms_per_frame);
       medians.push_back(f.median_px), p95s.push_back(f.p95_px), ms.push_back(f.ms_per_frame);
       held += f.median_px <= 1.0;
-      if (f.nees_in_band >= 0) in_band_frames += f.nees_in_band * f.nees_frames, frames += f.nees_frames;
+      if (f.nees_in_band >= 0) in_band_frames += f.nees_in_band * f.nees_frames, frames += f.nees_frames, below += f.nees_below, above += f.nees_above;
     }
     if (medians.empty()) continue;
     const Spread m = SpreadOf(medians), p = SpreadOf(p95s), t = SpreadOf(ms);
     const double pooled = frames > 0 ? in_band_frames / frames : -1;
     std::printf("over the draws: median misregistration <= 1 px in %d of %zu; median px: median %.2f, worst %.2f; p95 px: median %.2f;"
-                " NEES in band, all frames pooled: %.0f %%; ms/frame: median %.2f\n",
-                held, medians.size(), m.median, m.max, p.median, 100 * pooled, t.median);
-    char buf[320];
+                " NEES in band, all frames pooled: %.1f %% (below %.1f %%, above %.1f %%); ms/frame: median %.2f\n",
+                held, medians.size(), m.median, m.max, p.median, 100 * pooled, frames > 0 ? 100 * below / frames : 0.0,
+                frames > 0 ? 100 * above / frames : 0.0, t.median);
+    char buf[400];
     std::snprintf(buf, sizeof(buf), ",\"%s\":{\"draws\":%zu,\"held_1px\":%d,\"median_px_median\":%.3f,\"median_px_worst\":%.3f,\"p95_px_median\":%.3f,"
-                  "\"nees_in_band_pooled\":%.3f,\"ms_per_frame_median\":%.3f}",
-                  key.c_str(), medians.size(), held, m.median, m.max, p.median, pooled, t.median);
+                  "\"nees_in_band_pooled\":%.3f,\"nees_below_pooled\":%.3f,\"nees_above_pooled\":%.3f,\"ms_per_frame_median\":%.3f}",
+                  key.c_str(), medians.size(), held, m.median, m.max, p.median, pooled, frames > 0 ? below / frames : 0.0,
+                  frames > 0 ? above / frames : 0.0, t.median);
     json << buf;
   }
   json << "}";
@@ -971,6 +1025,15 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--gps-bias-sigma", o->gps_bias_sigma_m, "GPS multipath as a persisting bias of every fix, sigma per axis in m, a consider term (0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 100.0));
+  sub.add_option("--gate-chi2", o->gate_chi2_2dof, "vision gate per feature, chi-square with 2 dof (PoseFilterOptions::gate_chi2_2dof)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.1, 1e6));
+  sub.add_option("--pixel-sigma", o->pixel_sigma_px, "vision point / line sigma, px (PoseFilterOptions::pixel_sigma_px)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.01, 100.0));
+  sub.add_option("--tracked-sigma", o->tracked_sigma_px, "extra noise of a tracked (not re-detected) feature, px (VisionOptions::tracked_sigma_px)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 100.0));
   sub.add_option("--gps-min-sigma", o->gps_min_sigma_m, "floor of the GPS fixes' sigma, m (PoseFilterOptions::gps_min_sigma_m)")
       ->capture_default_str()
       ->check(ave::cli::Range(1e-3, 100.0));
@@ -986,6 +1049,8 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--footage-jpeg-quality", o->footage_jpeg_quality,
                  "JPEG-encode and decode every frame at this quality first, as ave-sim footage delivers them (0: off)")
       ->capture_default_str()->check(ave::cli::Range(0, 100));
+  sub.add_option("--match-csv", o->match_csv, "write every known-point match of every row and frame with its true projection to this CSV")
+      ->check(ave::cli::WritableFile());
   sub.add_option("--landmark-csv", o->landmark_csv, "write every unknown feature that joins the state (joint rows), with what it sits on, to this CSV")
       ->check(ave::cli::WritableFile());
   sub.add_option("--png", o->png, "plot to write (empty: none)")->capture_default_str()->check(ave::cli::WritableFile());
