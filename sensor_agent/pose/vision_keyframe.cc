@@ -1,0 +1,349 @@
+// Keyframes of the vision front end (VisionTracker::Update, step 3b): full matching of the static
+// model's known points and lines, coarse to fine, with the acquisition (relocalisation, the
+// chamfer alignment of the model's edges) and the lock's bookkeeping. Split from vision.cc.
+#include <algorithm>
+#include <cmath>
+#include <optional>
+#include <utility>
+#include <vector>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/ximgproc/fast_line_detector.hpp>
+
+#include "sensor_agent/pose/vision_impl.h"
+
+namespace ave::pose {
+namespace {
+
+using namespace internal;  // NOLINT: the front end's own helpers
+constexpr double kDegToRad = 3.14159265358979323846 / 180;
+
+}  // namespace
+
+// Relocalisation (VisionOptions::relocalize_extent_m): the chamfer alignment (shift and turn) of
+// the model's edges from positions on a horizontal grid around the filter's; the filter moves to
+// the best one when it fits clearly better than where it is. True when it moved.
+bool VisionTracker::Impl::Relocalize(PoseEkf& ekf, const cv::Mat& edge_distance, const cv::Mat& skyline_distance, double roll_search,
+                                     double roll_step) {
+  const Eigen::Vector2d centre(k.cx, k.cy);
+  const Eigen::Vector3d here = ekf.world_from_camera().translation;
+  auto fit = [&](const Eigen::Vector3d& position) {
+    PoseEkf moved = ekf;
+    moved.MovePosition(position, options.relocalize_step_m);
+    std::vector<Eigen::Vector2d> samples, sky_samples;
+    EdgeSamples(moved, samples, sky_samples);
+    // (A 4 px first grid: the distance transform is smooth, truncated at 8 px.)
+    return ChamferAlign(edge_distance, samples, skyline_distance, sky_samples, options.search_radius_px, centre, roll_search, roll_step, 4).score_px;
+  };
+  const double at_here = fit(here);
+  double best = at_here;
+  Eigen::Vector3d best_position = here;
+  const int n = static_cast<int>(std::floor(options.relocalize_extent_m / options.relocalize_step_m + 1e-9));
+  for (int i = -n; i <= n; ++i) {
+    for (int j = -n; j <= n; ++j) {
+      if (i == 0 && j == 0) continue;
+      const Eigen::Vector3d position = here + options.relocalize_step_m * Eigen::Vector3d(i, j, 0);
+      const double score = fit(position);
+      if (score < best) best = score, best_position = position;
+    }
+  }
+  // Then halved steps around the best, down to kFinest_m. (Heights were tried too, 0.5 m steps
+  // within +-1.5 m: 8 of 13 draws held instead of 12; on far façades a pitch mimics a height,
+  // and the chamfer score cannot tell them apart.)
+  constexpr double kFinest_m = 0.5;
+  double step = options.relocalize_step_m;
+  while (step > kFinest_m + 1e-9) {
+    step = std::max(kFinest_m, 0.5 * step);
+    const Eigen::Vector3d around = best_position;
+    for (int i = -1; i <= 1; ++i) {
+      for (int j = -1; j <= 1; ++j) {
+        if (i == 0 && j == 0) continue;
+        const Eigen::Vector3d position = around + step * Eigen::Vector3d(i, j, 0);
+        const double score = fit(position);
+        if (score < best) best = score, best_position = position;
+      }
+    }
+  }
+  if (!(best < at_here - options.relocalize_margin_px) || (options.max_alignment_score_px > 0 && best > options.max_alignment_score_px)) return false;
+  ekf.MovePosition(best_position, step);
+  return true;
+}
+
+// Known points the filter's pose predicts visible: (map index, predicted pixel).
+// Corners against the sky come first: nothing else nearby looks like them, while wall feet sit
+// among objects, people and ground texture.
+std::vector<std::pair<int, Eigen::Vector2d>> VisionTracker::Impl::PredictPoints(const PoseEkf& ekf) {
+  std::vector<std::pair<int, Eigen::Vector2d>> skyline, other;
+  const Eigen::Vector3d centre = ekf.world_from_camera().translation;
+  RefreshCache(centre);
+  for (size_t i = 0; i < map.points.size(); ++i) {
+    const std::optional<Eigen::Vector2d> uv = ekf.ProjectPoint(k, map.points[i]);
+    if (!uv || !InImage(k, *uv, kBorder_px) || !PointSeen(static_cast<int>(i), centre)) continue;
+    (PointSky(static_cast<int>(i), centre) ? skyline : other).emplace_back(static_cast<int>(i), *uv);
+  }
+  skyline.insert(skyline.end(), other.begin(), other.end());
+  return skyline;
+}
+
+// Sampled frame pixels of the predicted model edges, and those on the skyline (the model point
+// itself is seen and nothing is seen just above it), for the chamfer search.
+void VisionTracker::Impl::EdgeSamples(const PoseEkf& ekf, std::vector<Eigen::Vector2d>& samples, std::vector<Eigen::Vector2d>& sky_samples) {
+  const Eigen::Vector3d centre = ekf.world_from_camera().translation;
+  RefreshCache(centre);
+  for (size_t li = 0; li < map.lines.size(); ++li) {
+    const LineFeature& f = map.lines[li];
+    const auto a = ekf.ProjectPoint(k, f.a), b = ekf.ProjectPoint(k, f.b);
+    if (!a || !b || !LineMidSeen(static_cast<int>(li), centre)) continue;
+    const int steps = static_cast<int>(std::min(2000.0, (*b - *a).norm() / kEdgeSample_px));
+    const bool horizontal = std::abs(f.line.direction.z()) < 0.5;
+    std::vector<uint8_t>& sky = line_sky_samples[li];
+    if (horizontal && static_cast<int>(sky.size()) != steps + 1) sky.assign(steps + 1, 2);  // 2: not cast yet
+    for (int i = 0; i <= steps; ++i) {
+      const double s = steps == 0 ? 0.0 : static_cast<double>(i) / steps;
+      const Eigen::Vector2d p = ToFrame(*a + (*b - *a) * s);
+      if (!InImage(k, p, 1)) continue;
+      samples.push_back(p);
+      if (!horizontal) continue;
+      if (sky[i] == 2) {
+        const Eigen::Vector3d x = f.a + (f.b - f.a) * s;
+        sky[i] = Visible(centre, x) && SkyAbove(centre, x);
+      }
+      if (sky[i]) sky_samples.push_back(p);
+    }
+  }
+}
+
+// The longest detected segment along the predicted image of line feature `f`; nullopt if none.
+std::optional<Segment> VisionTracker::Impl::MatchLine(const PoseEkf& ekf, const LineFeature& f, const std::vector<Segment>& segments) const {
+  const std::optional<Eigen::Vector2d> pa = ekf.ProjectPoint(k, f.a), pb = ekf.ProjectPoint(k, f.b);
+  if (!pa || !pb || (*pb - *pa).norm() < kMinSegment_px) return std::nullopt;
+  const Eigen::Vector2d dir = (*pb - *pa).normalized();
+  const double length = (*pb - *pa).norm();
+  const Eigen::Vector2d normal(-dir.y(), dir.x());
+  std::optional<Segment> best;
+  double best_length = 0;
+  for (const Segment& s : segments) {
+    const Eigen::Vector2d sd = s.b - s.a;
+    const double sl = sd.norm();
+    if (sl < kMinSegment_px || sl <= best_length) continue;
+    if (std::abs(normal.dot(sd)) / sl > std::sin(kMaxAngle_rad)) continue;
+    if (std::abs(normal.dot(s.a - *pa)) > options.match_radius_px || std::abs(normal.dot(s.b - *pa)) > options.match_radius_px) continue;
+    const double ta = dir.dot(s.a - *pa), tb = dir.dot(s.b - *pa);
+    if (std::max(ta, tb) < 0 || std::min(ta, tb) > length) continue;  // beside the model segment
+    best = s;
+    best_length = sl;
+  }
+  return best;
+}
+
+// The Fast Line Detector fits its segments to Canny's whole-pixel edges; a matched one is moved
+// onto the sub-pixel intensity step along it (SearchEdge at 16 places, a Huber line fit), as LSD's
+// refinement does for its own. Unchanged when too little of it is found.
+Segment VisionTracker::Impl::RefineSegment(const cv::Mat& gray, const Segment& s) const {
+  constexpr int kSamples = 16;
+  const Eigen::Vector2d dir = (s.b - s.a).normalized(), normal(-dir.y(), dir.x());
+  std::vector<Eigen::Vector2d> samples;
+  for (int i = 0; i < kSamples; ++i) samples.push_back(ToFrame(s.a + (s.b - s.a) * ((i + 0.5) / kSamples)));
+  const std::vector<cv::Point2f> found = ToIdeal(SearchEdge(gray, samples, normal, 1.5, 12.0));
+  if (found.size() < kSamples / 2) return s;
+  cv::Vec4f fit;
+  cv::fitLine(found, fit, cv::DIST_HUBER, 0, 0.01, 0.01);
+  const Eigen::Vector2d d(fit[0], fit[1]), o(fit[2], fit[3]);
+  if (std::abs(d.dot(dir)) < std::cos(kMaxAngle_rad)) return s;
+  return {o + d * d.dot(s.a - o), o + d * d.dot(s.b - o)};
+}
+
+// 3b. Keyframe: full model matching, coarse to fine. The corners and segments detected here are
+// matched to the model's points and lines; the corners also seed new unknown tracks (step 4).
+void VisionTracker::Impl::UpdateKeyframe(PoseEkf& ekf, Frame& f) {
+  frames_since_keyframe = 0;
+  DetectCorners(f);
+  const std::vector<Segment> segments = DetectSegments(f);
+  // While acquiring (before the first lock, and after the pose was declared lost) the search turns
+  // the image too: the AHRS's roll error is not a shift. Once locked, a frame that disagrees (a bus
+  // covering half of it) must not pull the pose, and a turn fitted to the bus's edges would.
+  const bool acquiring = !locked_once;
+  const bool turn = acquiring;
+  // Coarse pass on a copy of the filter: the image offset that lays the predicted model edges on
+  // the frame's edges (chamfer), then points matched within a few pixels of prediction + offset;
+  // the copy's updated pose re-predicts everything for the fine pass.
+  const ImageAlignment alignment = AlignModelEdges(ekf, f, turn);
+  const PoseEkf coarse = CoarsePass(ekf, f, alignment, turn);
+  FinePass(ekf, f, coarse, segments);
+  UpdateLock(ekf, f, alignment, acquiring);
+  f.timer.Lap(kStageEkf);
+}
+
+// Keyframe corners: detected and refined to sub-pixel in the frame (KLT and new tracks start
+// there), and their ideal pixels, where the filter measures.
+void VisionTracker::Impl::DetectCorners(Frame& f) const {
+  cv::goodFeaturesToTrack(f.gray, f.frame_corners, 1500, 0.005, 3);
+  if (!f.frame_corners.empty()) {
+    cv::cornerSubPix(f.gray, f.frame_corners, cv::Size(4, 4), cv::Size(-1, -1),
+                     cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 20, 0.03));
+  }
+  f.corners = ToIdeal(f.frame_corners);  // where the filter measures
+  f.timer.Lap(kStageCorners);
+}
+
+// Keyframe line segments (VisionOptions::use_lines; SegmentDetector: the Fast Line Detector or
+// LSD), their end points in ideal pixels; none when lines are off.
+std::vector<Segment> VisionTracker::Impl::DetectSegments(Frame& f) {
+  std::vector<Segment> segments;
+  if (options.use_lines) {
+    std::vector<cv::Vec4f> lines;
+    if (options.segment_detector == SegmentDetector::kFastLine) {
+      if (!fast_lines) fast_lines = cv::ximgproc::createFastLineDetector(static_cast<int>(kMinSegment_px));
+      fast_lines->detect(f.gray, lines);
+    } else {
+      cv::createLineSegmentDetector(cv::LSD_REFINE_STD)->detect(f.gray, lines);
+    }
+    std::vector<cv::Point2f> ends;
+    for (const cv::Vec4f& l : lines) ends.insert(ends.end(), {cv::Point2f(l[0], l[1]), cv::Point2f(l[2], l[3])});
+    ends = ToIdeal(ends);
+    for (size_t i = 0; i + 1 < ends.size(); i += 2) {
+      segments.push_back({Eigen::Vector2d(ends[i].x, ends[i].y), Eigen::Vector2d(ends[i + 1].x, ends[i + 1].y)});
+    }
+  }
+  f.timer.Lap(kStageSegments);
+  return segments;
+}
+
+// The coarse alignment: the frame's edge distance transforms, the relocalisation search when one is
+// due (first frame, lost), the known points predicted from the filter's pose (f.predicted), and the
+// image motion (shift; and turn when `turn`) that best lays the predicted model edges on the
+// frame's edges.
+ImageAlignment VisionTracker::Impl::AlignModelEdges(PoseEkf& ekf, Frame& f, bool turn) {
+  cv::Mat edge_distance, skyline_distance;
+  EdgeDistances(f.gray, edge_distance, skyline_distance);
+  f.timer.Lap(kStageEdges);
+  const Eigen::Vector2d centre(k.cx, k.cy);
+  const double roll_search = options.acquisition_roll_search_deg * kDegToRad, roll_step = options.acquisition_roll_step_deg * kDegToRad;
+  if (relocalize && options.relocalize_extent_m > 0) {
+    relocalize = false;
+    f.stats.relocalized = Relocalize(ekf, edge_distance, skyline_distance, roll_search, roll_step);
+    f.timer.Lap(kStageChamfer);
+  }
+  f.predicted = PredictPoints(ekf);
+  f.stats.points_predicted = static_cast<int>(f.predicted.size());
+  std::vector<Eigen::Vector2d> samples, sky_samples;
+  EdgeSamples(ekf, samples, sky_samples);
+  f.timer.Lap(kStageVisibility);
+  const ImageAlignment alignment =
+      ChamferAlign(edge_distance, samples, skyline_distance, sky_samples, options.search_radius_px, centre, turn ? roll_search : 0.0, roll_step);
+  // Nowhere does the model's outline lie on this frame's edges (a bus across half of it): the
+  // frame's matches would be guesses, so none is applied, and the frame counts as a bad fit.
+  f.stats.unfit = options.max_alignment_score_px > 0 && alignment.score_px > options.max_alignment_score_px;
+  if (f.stats.unfit) f.budget = 0;
+  f.stats.coarse_offset_px = alignment.offset;
+  f.stats.coarse_rotation_rad = alignment.rotation_rad;
+  f.timer.Lap(kStageChamfer);
+  return alignment;
+}
+
+// The coarse pass proper: the predicted points moved by the alignment and matched within
+// kCoarseMatch_px, applied to a copy of the filter, whose pose is returned for the fine pass.
+PoseEkf VisionTracker::Impl::CoarsePass(const PoseEkf& ekf, Frame& f, const ImageAlignment& alignment, bool turn) {
+  const Eigen::Vector2d centre(k.cx, k.cy);
+  std::vector<std::pair<int, Eigen::Vector2d>> moved = f.predicted;
+  for (auto& [index, uv] : moved) uv = alignment.Apply(uv, centre);
+  const std::vector<std::pair<int, int>> coarse_matches = MatchPoints(moved, f.corners, Eigen::Vector2d::Zero(), kCoarseMatch_px);
+  f.timer.Lap(kStageMatch);
+  PoseEkf coarse = ekf;
+  for (const auto& [index, j] : coarse_matches) {
+    (void)coarse.UpdatePoint(k, map.points[index], Eigen::Vector2d(f.corners[j].x, f.corners[j].y));
+  }
+  // Until the lock holds: the coarse pass again from the coarse pose (matched within the coarse
+  // radius, applied to a fresh copy of the filter), as the pose that the first matches pulled
+  // brings more of the image's corners within reach (iterated re-linearisation).
+  for (int pass = 1; turn && pass < options.acquisition_coarse_passes; ++pass) {
+    const std::vector<std::pair<int, int>> again = MatchPoints(PredictPoints(coarse), f.corners, Eigen::Vector2d::Zero(), kCoarseMatch_px);
+    coarse = ekf;
+    for (const auto& [index, j] : again) (void)coarse.UpdatePoint(k, map.points[index], Eigen::Vector2d(f.corners[j].x, f.corners[j].y));
+  }
+  f.timer.Lap(kStageEkf);
+  return coarse;
+}
+
+// Fine pass on the filter itself: known points, then lines, then converged unknown points.
+// Everything is predicted again from the coarse pose (f.predicted, then also the new tracks' grid)
+// and matched within match_radius_px.
+void VisionTracker::Impl::FinePass(PoseEkf& ekf, Frame& f, const PoseEkf& coarse, const std::vector<Segment>& segments) {
+  f.predicted = PredictPoints(coarse);
+  std::vector<bool> seen_lines(map.lines.size(), false);
+  if (options.use_lines) {
+    const Eigen::Vector3d centre = coarse.world_from_camera().translation;
+    for (size_t i = 0; i < map.lines.size(); ++i) seen_lines[i] = LineSeen(static_cast<int>(i), centre);
+  }
+  f.timer.Lap(kStageVisibility);
+  const std::vector<std::pair<int, int>> matches = MatchPoints(f.predicted, f.corners, Eigen::Vector2d::Zero(), options.match_radius_px);
+  std::vector<std::optional<Segment>> line_matches(map.lines.size());
+  for (size_t i = 0; i < map.lines.size(); ++i) {
+    if (seen_lines[i]) line_matches[i] = MatchLine(coarse, map.lines[i], segments);
+    if (line_matches[i] && options.segment_detector == SegmentDetector::kFastLine) line_matches[i] = RefineSegment(f.gray, *line_matches[i]);
+  }
+  f.timer.Lap(kStageMatch);
+  ApplyFineMatches(ekf, f, matches, line_matches);
+}
+
+// The fine pass's updates of the filter, points then lines, within the frame's budget; the
+// accepted ones are followed by KLT (points) and edge search (lines) until the next keyframe.
+void VisionTracker::Impl::ApplyFineMatches(PoseEkf& ekf, Frame& f, const std::vector<std::pair<int, int>>& matches,
+                                           const std::vector<std::optional<Segment>>& line_matches) {
+  known.clear();
+  const double acquiring_var = good_full_matches < options.lock_frames ? options.acquiring_sigma_px * options.acquiring_sigma_px : 0.0;
+  // Until the lock holds, a point's match may be the wrong corner, and the same wrong one on the
+  // next acquiring frames (each is matched from the pose the last one pulled): a persisting
+  // association error per point (acquisition_association_px), ids after the shared one.
+  const bool acquiring_association = good_full_matches < options.lock_frames && options.acquisition_association_px > 0;
+  for (const auto& [index, j] : matches) {
+    const Eigen::Vector2d uv(f.corners[j].x, f.corners[j].y);
+    f.stats.point_matches.emplace_back(map.points[index], uv);
+    if (f.budget <= 0) continue;
+    --f.budget;
+    const PointBias second = acquiring_association
+                                 ? PointBias{static_cast<int64_t>(map.points.size()) + 2 + index, options.acquisition_association_px}
+                                 : PointBias{SharedBiasId(), options.feature_shared_bias_px};
+    const UpdateResult r = ekf.UpdatePoint(k, map.points[index], uv, acquiring_var, {{{BiasId(index), options.feature_point_bias_px}, second}});
+    Count(r, f.stats.points_used, f.stats);
+    if (r.accepted()) known.push_back({index, f.frame_corners[j], f.frame_corners[j]});
+  }
+  known_lines.clear();
+  for (size_t i = 0; i < line_matches.size() && f.budget > 0; ++i) {
+    if (!line_matches[i]) continue;
+    --f.budget;
+    const UpdateResult r = ekf.UpdateLine(k, map.lines[i].line, line_matches[i]->a, line_matches[i]->b, acquiring_var);
+    Count(r, f.stats.lines_used, f.stats);
+    if (r.accepted()) known_lines.push_back(static_cast<int>(i));
+  }
+}
+
+// The lock after a keyframe: good and bad full matchings counted (lock_frames, lost_frames); after
+// lost_frames bad ones in a row the pose is declared lost, its covariance widened and the next
+// keyframe relocalises.
+void VisionTracker::Impl::UpdateLock(PoseEkf& ekf, Frame& f, const ImageAlignment& alignment, bool acquiring) {
+  // The lock: enough features applied and few rejected; tracking resumes after lock_frames of these.
+  const int applied = f.stats.points_used + f.stats.lines_used, tried = applied + f.stats.rejected;
+  // ... and the model's edges lay down on the frame's where the filter predicts them: a coarse
+  // alignment that had to move the image means the matches were taken from a pose that was off,
+  // and a lock formed there holds a wrong association (issue 19, sixth session).
+  // (A turn of one search step, 0.5 deg, is the prediction's ordinary roll error without an AHRS.)
+  const bool aligned = !acquiring || !(options.lock_alignment_px > 0) ||
+                       (alignment.offset.norm() <= options.lock_alignment_px &&
+                        std::abs(alignment.rotation_rad) <= options.acquisition_roll_step_deg * kDegToRad + 1e-9);
+  const bool good = applied >= options.min_tracked_known && f.stats.rejected <= options.weak_lock_gated_share * tried && aligned;
+  good_full_matches = good ? good_full_matches + 1 : 0;
+  bad_full_matches = good ? 0 : bad_full_matches + 1;
+  locked_once = locked_once || good_full_matches >= options.lock_frames;
+  if (options.lost_frames > 0 && bad_full_matches >= options.lost_frames) {
+    ekf.InflatePose(0.5, options.lost_orientation_sigma_deg * 3.14159265358979323846 / 180);
+    bad_full_matches = 0;
+    relocalize = true;
+    locked_once = false;
+    ++f.stats.relocks;
+  }
+}
+
+}  // namespace ave::pose
