@@ -1,5 +1,5 @@
 #pragma once
-// Internal to the vision front end (vision.cc, vision_match.cc and their tests): image-side
+// Internal to the vision front end (vision.cc, vision_keyframe.cc, vision_match.cc and their tests): image-side
 // matching helpers. Includes OpenCV; do not include from public headers.
 #include <cmath>
 #include <utility>
