@@ -46,6 +46,7 @@ std::string VisionOptions::Check() const {
     return "relocalize_extent_m must be in [0, 20 relocalize_step_m], relocalize_step_m > 0 and relocalize_margin_px >= 0";
   if (lost_frames < 0 || !(lost_orientation_sigma_deg >= 0)) return "lost_frames and lost_orientation_sigma_deg must be >= 0";
   if (!(tracked_sigma_px >= 0)) return "tracked_sigma_px must be >= 0";
+  if (!(tracked_max_innovation_px >= 0)) return "tracked_max_innovation_px must be >= 0";
   if (!(landmark_sigma_px >= 0)) return "landmark_sigma_px must be >= 0";
   if (!(landmark_bias_px >= 0 && std::isfinite(landmark_bias_px))) return "landmark_bias_px must be finite and >= 0";
   if (!(join_depth_sigma_scale > 0 && std::isfinite(join_depth_sigma_scale))) return "join_depth_sigma_scale must be finite and > 0";
@@ -358,6 +359,13 @@ void VisionTracker::Impl::UpdateTrackedPoints(PoseEkf& ekf, Frame& f) {
     f.stats.point_matches.emplace_back(p, f.known_uv[i]);
     if (f.budget <= 0) continue;
     --f.budget;
+    if (options.tracked_max_innovation_px > 0) {
+      const std::optional<Eigen::Vector2d> predicted = ekf.ProjectPoint(k, p);
+      if (!predicted || (*predicted - f.known_uv[i]).norm() > options.tracked_max_innovation_px) {
+        ++f.stats.rejected_tracked_jump;
+        continue;
+      }
+    }
     const UpdateResult r = ekf.UpdatePoint(k, p, f.known_uv[i], options.tracked_sigma_px * options.tracked_sigma_px,
                                            {{{BiasId(known[i].index), options.feature_point_bias_px}, {SharedBiasId(), options.feature_shared_bias_px}}});
     Count(r, f.stats.points_used, f.stats);

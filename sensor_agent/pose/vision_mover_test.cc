@@ -153,7 +153,11 @@ TEST_F(VisionMoverTest, FeaturesOnMoversDoNotJoinTheStateNorPullThePose) {
   EXPECT_GT(with.joined, 0) << "static features must still join";
   EXPECT_GT(with.refused, 0);
   EXPECT_EQ(without.refused, 0);
-  EXPECT_LT(with.median_px, without.median_px);
+  // Until issue 19's seventh session the run without the tests was also the worse registered (its
+  // movers pulled the pose). With the tracked known features' refusal beyond 3 px of the prediction
+  // and their noise at 1 px, only one mover feature joins without the tests here and the 16 joined
+  // features register it better (0.43 px against 0.66 with the tests, 0.61 known only); what the
+  // tests guarantee is above (no mover joins) and below (the pose as registered as known only).
   EXPECT_LT(with.median_px, 1.2 * known.median_px + 0.05)
       << "joint with tests " << with.median_px << " px, without " << without.median_px << " px, known only " << known.median_px << " px";
 }

@@ -64,6 +64,7 @@ struct PoseBenchOptions {
   double gate_chi2_2dof = pose::PoseFilterOptions{}.gate_chi2_2dof;  // issue 19, seventh session
   double pixel_sigma_px = pose::PoseFilterOptions{}.pixel_sigma_px;
   double tracked_sigma_px = pose::VisionOptions{}.tracked_sigma_px;
+  double tracked_max_innovation_px = pose::VisionOptions{}.tracked_max_innovation_px;
   double gps_bias_sigma_m = pose::PoseFilterOptions{}.gps_bias_sigma_m;  // issue 19: multipath as a consider bias
   int seed = 0;  // added to the scenario's seed: another draw of every noise (GPS, IMU, camera)
   int seeds = 1;  // > 1: Monte Carlo over seeds seed .. seed + seeds - 1 (RunPoseSeeds)
@@ -141,7 +142,7 @@ struct Row {
   int matches_beyond_3px = 0;
   std::array<double, pose::kVisionStageCount> stage_ms{};
   int keyframes = 0, weak_locks = 0, relocks = 0, unfit = 0, relocalized = 0;
-  int64_t rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0, klt_lost = 0, unknown_dropped = 0;
+  int64_t rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0, klt_lost = 0, unknown_dropped = 0, rejected_tracked_jump = 0;
   int nees_frames = 0, nees_in_band = 0, nees_below = 0, nees_above = 0;
   // Unknown features joining the state (joint mode), against the static mesh's point on the true
   // ray through the same pixel: 3D error (m) and 3-dof NEES of their estimate.
@@ -507,6 +508,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.acquisition_coarse_passes = o.acquisition_passes;
     vo.lock_alignment_px = o.lock_alignment_px;
     vo.tracked_sigma_px = o.tracked_sigma_px;
+    vo.tracked_max_innovation_px = o.tracked_max_innovation_px;
     vo.max_alignment_score_px = o.max_alignment_score_px;
     vo.relocalize_extent_m = o.relocalize_extent_m;
     vo.relocalize_step_m = o.relocalize_step_m;
@@ -557,6 +559,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
         row.unfit += s.unfit;
         row.relocalized += s.relocalized;
         row.relocks += s.relocks;
+        row.rejected_tracked_jump += s.rejected_tracked_jump;
         row.rejected_gate += s.rejected_gate, row.rejected_behind += s.rejected_behind, row.rejected_not_finite += s.rejected_not_finite;
         row.klt_lost += s.klt_lost, row.unknown_dropped += s.unknown_dropped;
         row.landmarks_in_state += s.landmarks_in_state;
@@ -753,11 +756,12 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     for (const Row* r : staged) std::printf(" **%.2f** |", r->TotalMs());
     std::printf("\n");
   }
-  std::printf("\nrejections over the run (features not applied, by reason):\n| mode | outside the gate | behind the camera | not finite | KLT lost | unknown features dropped (gate) | weak-lock keyframes | declared lost | keyframes the model fits nowhere | relocalised |\n");
-  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+  std::printf("\nrejections over the run (features not applied, by reason):\n| mode | outside the gate | tracked, off the prediction | behind the camera | not finite | KLT lost | unknown features dropped (gate) | weak-lock keyframes | declared lost | keyframes the model fits nowhere | relocalised |\n");
+  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
   for (const Row& r : rows) {
     if (r.features == 0 || r.mode != "gps-imu-vision") continue;
-    std::printf("| %s | %lld | %lld | %lld | %lld | %lld | %d | %d | %d | %d |\n", RowName(r).c_str(), static_cast<long long>(r.rejected_gate),
+    std::printf("| %s | %lld | %lld | %lld | %lld | %lld | %lld | %d | %d | %d | %d |\n", RowName(r).c_str(), static_cast<long long>(r.rejected_gate),
+                static_cast<long long>(r.rejected_tracked_jump),
                 static_cast<long long>(r.rejected_behind), static_cast<long long>(r.rejected_not_finite), static_cast<long long>(r.klt_lost),
                 static_cast<long long>(r.unknown_dropped), r.weak_locks, r.relocks, r.unfit, r.relocalized);
   }
@@ -1032,6 +1036,10 @@ Runner AddPoseBench(CLI::App& sub) {
       ->capture_default_str()
       ->check(ave::cli::Range(0.01, 100.0));
   sub.add_option("--tracked-sigma", o->tracked_sigma_px, "extra noise of a tracked (not re-detected) feature, px (VisionOptions::tracked_sigma_px)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 100.0));
+  sub.add_option("--tracked-max-innovation", o->tracked_max_innovation_px,
+                 "a tracked known feature this far (px) from the prediction is not applied and its track ends (VisionOptions::tracked_max_innovation_px; 0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 100.0));
   sub.add_option("--gps-min-sigma", o->gps_min_sigma_m, "floor of the GPS fixes' sigma, m (PoseFilterOptions::gps_min_sigma_m)")
