@@ -199,6 +199,10 @@ int main(int argc, char** argv) {
   app.add_option("--pose-mode", pose_mode, "pose of sim sources: truth, gps-imu or gps-imu-vision (fused, with covariance)")
       ->capture_default_str()->check(CLI::IsMember({"truth", "gps-imu", "gps-imu-vision"}));
   app.add_option("--pose-log", pose_log, "DIR with gps.csv and imu.csv for --pose-mode (default: simulated)");
+  double carrier_height_m = -1;
+  app.add_option("--carrier-height", carrier_height_m,
+                 "gps-imu-vision: the carried camera's height above the ground in m (-1: a walking sim camera's own, 0: none)")
+      ->capture_default_str()->check(ave::cli::Range(-1.0, 100.0));
   app.add_option("--intrinsics", intrinsics_file, "intrinsics YAML (ave-calibrate --out) for sources without intrinsics");
   bool detect = false, detect_only = false;
   std::string tracks_out, background = "average";
@@ -270,7 +274,7 @@ int main(int argc, char** argv) {
   auto source = ave::OpenSource(source_spec, source_options);
   if (source.ok()) {
     source = ave::pose::WithFusedPose(std::move(*source), source_spec,
-                                      {.mode = *ave::pose::ParsePoseMode(pose_mode), .log_dir = pose_log});
+                                      {.mode = *ave::pose::ParsePoseMode(pose_mode), .log_dir = pose_log, .carrier_height_m = carrier_height_m});
   }
   if (!source.ok()) {
     std::cerr << "ave-agent: " << source.status().message() << "\n";

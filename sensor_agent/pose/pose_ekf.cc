@@ -52,7 +52,7 @@ std::string PoseFilterOptions::Check() const {
     return "gyro_bias_random_walk_rad_s_sqrt_s must be finite and >= 0";
   }
   if (!positive(pixel_sigma_px)) return "pixel_sigma_px must be finite and > 0";
-  if (!positive(gate_chi2_3dof) || !positive(gate_chi2_2dof)) return "gate_chi2_* must be finite and > 0";
+  if (!positive(gate_chi2_3dof) || !positive(gate_chi2_2dof) || !positive(gate_chi2_1dof)) return "gate_chi2_* must be finite and > 0";
   if (!positive(max_predict_s)) return "max_predict_s must be finite and > 0";
   if (!positive(min_variance)) return "min_variance must be finite and > 0";
   return {};
@@ -140,12 +140,20 @@ UpdateResult PoseEkf::Correct(const Eigen::Matrix<double, M, 1>& innovation, con
   const Eigen::Matrix<double, M, M> S = H * PHt + R;
   const Eigen::LDLT<Eigen::Matrix<double, M, M>> ldlt(S);
   if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().array() > 0).all()) return {Rejection::kNotFinite, 0};
-  const double d2 = innovation.dot(ldlt.solve(innovation));
+  // S^-1 b (a scalar division for one row: GCC 12 warns falsely inside Eigen's 1x1 LDLT solve).
+  auto solve = [&](const auto& b) {
+    if constexpr (M == 1) {
+      return (b / S(0, 0)).eval();
+    } else {
+      return ldlt.solve(b).eval();
+    }
+  };
+  const double d2 = innovation.dot(solve(innovation));
   if (!std::isfinite(d2)) return {Rejection::kNotFinite, 0};
   if (d2 > gate_chi2) return {Rejection::kGate, d2};
-  const Eigen::Matrix<double, kErrorDim, M> K = ldlt.solve(PHt.transpose()).transpose();
+  const Eigen::Matrix<double, kErrorDim, M> K = solve(PHt.transpose()).transpose();
   if (!landmark_ids_.empty()) {
-    const Eigen::Matrix<double, Eigen::Dynamic, M> KL = ldlt.solve((cross_.transpose() * H.transpose()).transpose()).transpose();
+    const Eigen::Matrix<double, Eigen::Dynamic, M> KL = solve((cross_.transpose() * H.transpose()).transpose()).transpose();
     CorrectLandmarks<M>(K, KL, S, innovation);
   }
   const StateMatrix I_KH = StateMatrix::Identity() - K * H;
@@ -391,6 +399,13 @@ UpdateResult PoseEkf::UpdatePosition(const Eigen::Vector3d& position_m, const Ei
   const UpdateResult r = Correct<3>(position_m - p_, H, R, options_.gate_chi2_3dof);
   applying_gps_ = false;
   return r;
+}
+
+UpdateResult PoseEkf::UpdateHeight(double z_m, double sigma_m) {
+  if (!std::isfinite(z_m) || !std::isfinite(sigma_m) || !(sigma_m > 0)) return {Rejection::kNotFinite, 0};
+  Eigen::Matrix<double, 1, kErrorDim> H = Eigen::Matrix<double, 1, kErrorDim>::Zero();
+  H(0, kPos + 2) = 1;
+  return Correct<1>(Eigen::Matrix<double, 1, 1>(z_m - p_.z()), H, Eigen::Matrix<double, 1, 1>(sigma_m * sigma_m), options_.gate_chi2_1dof);
 }
 
 UpdateResult PoseEkf::UpdateOrientation(const Eigen::Quaterniond& world_from_camera, double sigma_rad) {

@@ -91,6 +91,7 @@ struct PoseFilterOptions {
   double pixel_sigma_px = 1.5;          // vision point / line-distance sigma
   double gate_chi2_3dof = 25.0;         // GPS / orientation gate (3 dof); chi2(3) p=1e-5 is 25.9
   double gate_chi2_2dof = 16.0;         // vision gate per feature (2 dof); chi2(2) p=3e-4
+  double gate_chi2_1dof = 15.1;         // height gate (1 dof); chi2(1) p=1e-4
   double max_predict_s = 5.0;           // longer gaps are predicted in steps of this
   double min_variance = 1e-12;          // covariance diagonal floor
 
@@ -143,6 +144,10 @@ class PoseEkf {
   UpdateResult UpdatePosition(const Eigen::Vector3d& position_m, const Eigen::Matrix3d& covariance);
   UpdateResult UpdateOrientation(const Eigen::Quaterniond& world_from_camera, double sigma_rad);
   UpdateResult UpdateRate(const Eigen::Vector3d& rate_in_camera_rad_s, double sigma_rad_s);
+  // The camera centre's height (local z, m) with its sigma: a carried camera's height above the
+  // static model's ground (issue 19, eighth session; VisionOptions::carrier_height_m). Gated at
+  // chi2(1) gate_chi2_1dof.
+  UpdateResult UpdateHeight(double z_m, double sigma_m);
   // A known (or estimated) 3D point seen at pixel `uv`; `extra_variance_px2` adds the projected
   // uncertainty of an estimated point.
   //

@@ -272,6 +272,29 @@ TEST(PoseEkf, A50MetreGpsOutlierIsGatedWithItsDistance) {
   EXPECT_TRUE(ekf.UpdatePosition(Eigen::Vector3d(0.1, 0, 0), Eigen::Matrix3d::Identity() * 0.05 * 0.05).accepted());
 }
 
+// Issue 19, eighth session: a height measurement (a carried camera above the ground) moves the
+// height alone, by the ratio of the variances; a height tens of metres off is gated, a NaN or a
+// zero sigma refused, and the state is then unchanged.
+TEST(PoseEkf, AHeightMeasurementMovesTheHeightAloneAndOutliersAreRefused) {
+  PoseEkf ekf = Filter(Rigid3d(), 0.5, 1 * kDeg);
+  ekf.Predict(100'000'000);
+  const StateMatrix before = ekf.covariance();
+  const double var = before(kPos + 2, kPos + 2);
+  EXPECT_EQ(ekf.UpdateHeight(30.0, 0.1).rejection, Rejection::kGate);
+  EXPECT_EQ(ekf.UpdateHeight(std::nan(""), 0.1).rejection, Rejection::kNotFinite);
+  EXPECT_EQ(ekf.UpdateHeight(0.5, 0.0).rejection, Rejection::kNotFinite);
+  EXPECT_EQ(ekf.world_from_camera().translation, Eigen::Vector3d::Zero());
+  ASSERT_TRUE(ekf.UpdateHeight(-1.0, 0.1).accepted());
+  const Eigen::Vector3d p = ekf.world_from_camera().translation;
+  EXPECT_NEAR(p.z(), -var / (var + 0.01), 1e-9);
+  EXPECT_NEAR(p.x(), 0, 1e-12);
+  EXPECT_NEAR(p.y(), 0, 1e-12);
+  const StateMatrix after = ekf.covariance();
+  EXPECT_NEAR(after(kPos + 2, kPos + 2), var * 0.01 / (var + 0.01), 1e-9);
+  EXPECT_NEAR(after(kPos, kPos), before(kPos, kPos), 1e-12);
+  EXPECT_TRUE(after.isApprox(after.transpose(), 1e-12));
+}
+
 TEST(PoseEkf, TimeMustNotGoBackwardsAndZeroDtIsANoOp) {
   PoseEkf ekf = Filter(Rigid3d());
   ASSERT_TRUE(ekf.Predict(1'000'000'000).accepted());

@@ -51,7 +51,6 @@ absl::StatusOr<std::unique_ptr<FrameSource>> WithFusedPose(std::unique_ptr<Frame
                                                            const PoseSourceOptions& options) {
   if (options.mode == PoseMode::kTruth) return inner;
   if (const std::string why = options.filter.Check(); !why.empty()) return absl::InvalidArgumentError("pose filter: " + why);
-  if (const std::string why = options.vision.Check(); !why.empty()) return absl::InvalidArgumentError("vision: " + why);
   const size_t hash = sim_spec.find('#');
   if (sim_spec.rfind("sim:", 0) != 0 || hash == std::string::npos) {
     return absl::InvalidArgumentError(absl::StrCat("--pose-mode ", PoseModeName(options.mode), " needs a sim:SCENARIO#CAMERA source, got '",
@@ -78,8 +77,15 @@ absl::StatusOr<std::unique_ptr<FrameSource>> WithFusedPose(std::unique_ptr<Frame
   }
   std::unique_ptr<VisionTracker> vision;
   if (options.mode == PoseMode::kGpsImuVision) {
+    VisionOptions vision_options = options.vision;
+    if (options.carrier_height_m >= 0) {
+      vision_options.carrier_height_m = options.carrier_height_m;
+    } else if (camera->path) {
+      vision_options.carrier_height_m = camera->path->height_m;
+    }
+    if (const std::string why = vision_options.Check(); !why.empty()) return absl::InvalidArgumentError("vision: " + why);
     vision = std::make_unique<VisionTracker>(CampusFeatureMap(scenario->world), scene::BuildStaticMesh(scenario->world, 2.0),
-                                             camera->intrinsics, options.vision);
+                                             camera->intrinsics, vision_options);
   }
   return std::make_unique<FusedPoseSource>(std::move(inner), options.mode, PoseTracker(std::move(log), options.filter), std::move(vision));
 }

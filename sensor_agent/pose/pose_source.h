@@ -17,6 +17,9 @@ struct PoseSourceOptions {
   PoseMode mode = PoseMode::kTruth;
   std::string log_dir;      // DIR with gps.csv and imu.csv; empty: simulate the camera's streams
   double simulate_s = 900;  // seconds of GPS / inertial data simulated when there is no log
+  // The carried camera's height above the ground (VisionOptions::carrier_height_m); < 0: the sim
+  // camera's own when it walks a path (the backpack's 1.7 m), else none.
+  double carrier_height_m = -1;
   PoseFilterOptions filter;
   VisionOptions vision;
 };

@@ -45,6 +45,8 @@ std::string VisionOptions::Check() const {
   if (!(relocalize_extent_m >= 0) || !(relocalize_step_m > 0) || !(relocalize_margin_px >= 0) || relocalize_extent_m > 20 * relocalize_step_m)
     return "relocalize_extent_m must be in [0, 20 relocalize_step_m], relocalize_step_m > 0 and relocalize_margin_px >= 0";
   if (lost_frames < 0 || !(lost_orientation_sigma_deg >= 0)) return "lost_frames and lost_orientation_sigma_deg must be >= 0";
+  if (!(carrier_height_m >= 0) || !(carrier_height_sigma_m > 0) || !(carrier_height_correlation_s >= 0))
+    return "carrier_height_m and carrier_height_correlation_s must be >= 0 and carrier_height_sigma_m > 0";
   if (!(tracked_sigma_px >= 0)) return "tracked_sigma_px must be >= 0";
   if (!(tracked_max_innovation_px >= 0)) return "tracked_max_innovation_px must be >= 0";
   if (!(landmark_sigma_px >= 0)) return "landmark_sigma_px must be >= 0";
@@ -150,6 +152,9 @@ VisionTracker::VisionTracker(FeatureMap map, const TriangleMesh& mesh, PinholeIn
     : impl_(std::make_unique<Impl>()) {
   impl_->map = std::move(map);
   impl_->bvh = MeshBvh(mesh);
+  impl_->ground_triangle.assign(mesh.TriangleCount(), false);
+  for (size_t i = 0; i < mesh.TriangleCount() && i < mesh.triangle_material.size(); ++i)
+    impl_->ground_triangle[i] = mesh.triangle_material[i] == SurfaceMaterial::kTerrain || mesh.triangle_material[i] == SurfaceMaterial::kRoad;
   impl_->k = intrinsics;
   impl_->options = options;
   for (double d : intrinsics.distortion) impl_->distorted |= d != 0;
@@ -182,6 +187,7 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
   cv::cvtColor(image, f.gray, cv::COLOR_BGR2GRAY);
   f.timer.Lap(kStageGray);
 
+  m.ConstrainHeight(ekf, f);  // 0. a carried camera's height above the ground
   m.TrackByKlt(ekf, f);      // 1. known and unknown features followed into this frame
   m.DecideKeyframe(ekf, f);  // 2. does the lock hold?
   if (!f.keyframe) {
@@ -196,6 +202,21 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
   m.ConsiderFeatureBias(ekf, f);
   for (int s = 0; s < kVisionStageCount; ++s) (s == kStageEkf || s == kStageUnknown ? f.stats.update_ms : f.stats.detect_ms) += f.stats.stage_ms[s];
   return std::move(f.stats);
+}
+
+// 0. A carried camera's height (VisionOptions::carrier_height_m): the static model's ground
+// straight below the filter's position, plus the carrier's height. Only terrain and road count as
+// ground (a bench, a kiosk roof or a tree below is not where the carrier stands).
+void VisionTracker::Impl::ConstrainHeight(PoseEkf& ekf, Frame& f) {
+  if (!(options.carrier_height_m > 0) || (last_height_ns != INT64_MIN && ekf.time_ns() <= last_height_ns)) return;
+  const Eigen::Vector3d p = ekf.world_from_camera().translation;
+  const std::optional<RayHit> hit = bvh.Raycast(p, Eigen::Vector3d(0, 0, -1), 1e-3, 4 * options.carrier_height_m + 10);
+  if (!hit || hit->triangle >= ground_triangle.size() || !ground_triangle[hit->triangle]) return;
+  const double dt_s = last_height_ns == INT64_MIN ? options.carrier_height_correlation_s : static_cast<double>(ekf.time_ns() - last_height_ns) * 1e-9;
+  const double inflation = options.carrier_height_correlation_s > dt_s ? options.carrier_height_correlation_s / dt_s : 1.0;
+  const double ground_z = p.z() - hit->distance_m;
+  f.stats.height_applied = ekf.UpdateHeight(ground_z + options.carrier_height_m, options.carrier_height_sigma_m * std::sqrt(inflation)).accepted();
+  last_height_ns = ekf.time_ns();
 }
 
 // 1. KLT: known features matched on the last keyframe and unknown features, from their

@@ -214,6 +214,18 @@ struct VisionOptions {
   // most lock_alignment_px, so a lock's matches are rarely a corner off; at 3 px the lock's frames
   // were below the band on 10 of 13 draws (NEES 0.2-0.8 at 0.2-0.5 s).
   double acquisition_association_px = 1;
+  // Carried camera (issue 19, eighth session): > 0, the camera rides this high above the ground
+  // (a backpack or a helmet: the campus walker's 1.7 m), and every frame the filter's height is
+  // measured as the static model's ground under its position (a ray cast straight down that hits
+  // terrain or road) plus this, with carrier_height_sigma_m (gait, posture, the model's ground
+  // error), the error correlated over carrier_height_correlation_s (a frame dt after the last
+  // counts as dt / correlation of an independent one; the first at full weight). Far façades cannot
+  // tell a height error from a pitch error, and GPS heights are 1-2 m off among buildings: without
+  // this, draws of the noise whose first fix was low locked onto a pitched, lowered pose. 0: off
+  // (a mast camera, a vehicle whose mount height is not known).
+  double carrier_height_m = 0;
+  double carrier_height_sigma_m = 0.1;
+  double carrier_height_correlation_s = 2.0;
   // A detection bias every known point shares (one 2D pixel offset for all of them, every frame),
   // beside the per-point one above: a consider bias of this sigma per axis. 0: none.
   double feature_shared_bias_px = 0;
@@ -278,7 +290,8 @@ struct VisionFrameStats {
   int known_tracked = 0;     // known features followed by KLT into this frame
   // Why measurements did not update the pose (counted per feature).
   int rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0;
-  int rejected_tracked_jump = 0;  // tracked known features beyond tracked_max_innovation_px of the prediction
+  int rejected_tracked_jump = 0;
+  bool height_applied = false;  // the carried camera's height above the ground was applied (carrier_height_m)  // tracked known features beyond tracked_max_innovation_px of the prediction
   int klt_lost = 0;          // tracks KLT lost (status 0 or left the image)
   int landmarks_in_state = 0;  // unknown features in the pose filter's state after this frame (joint mode)
   // Unknown features that joined the state on this frame: estimate, covariance, ideal pixel.

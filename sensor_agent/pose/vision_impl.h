@@ -116,6 +116,8 @@ struct VisionTracker::Impl {
 
   FeatureMap map;
   MeshBvh bvh;
+  std::vector<bool> ground_triangle;  // per mesh triangle: terrain or road (ConstrainHeight)
+  int64_t last_height_ns = INT64_MIN;  // the carried camera's height last applied (ConstrainHeight)
   PinholeIntrinsics k;
   VisionOptions options;
   std::vector<cv::Mat> previous_pyramid, keyframe_pyramid;
@@ -200,6 +202,7 @@ struct VisionTracker::Impl {
   // --- Model matching (vision_keyframe.cc) ---
 
   // Relocalisation: moves the filter to the best chamfer fit on a grid of positions around its own.
+  void ConstrainHeight(PoseEkf& ekf, Frame& f);
   bool Relocalize(PoseEkf& ekf, const cv::Mat& edge_distance, const cv::Mat& skyline_distance, double roll_search, double roll_step);
   // Known points the filter's pose predicts visible, skyline corners first.
   std::vector<Prediction> PredictPoints(const PoseEkf& ekf);

@@ -235,7 +235,9 @@ ImageAlignment VisionTracker::Impl::AlignModelEdges(PoseEkf& ekf, Frame& f, bool
       ChamferAlign(edge_distance, samples, skyline_distance, sky_samples, options.search_radius_px, centre, turn ? roll_search : 0.0, roll_step);
   // Nowhere does the model's outline lie on this frame's edges (a bus across half of it): the
   // frame's matches would be guesses, so none is applied, and the frame counts as a bad fit.
-  f.stats.unfit = options.max_alignment_score_px > 0 && alignment.score_px > options.max_alignment_score_px;
+  // (A frame with too few model edges in view to score, +infinity, is not called unfit: its known
+  // corners still go through the gate.)
+  f.stats.unfit = options.max_alignment_score_px > 0 && std::isfinite(alignment.score_px) && alignment.score_px > options.max_alignment_score_px;
   if (f.stats.unfit) f.budget = 0;
   f.stats.coarse_offset_px = alignment.offset;
   f.stats.coarse_rotation_rad = alignment.rotation_rad;

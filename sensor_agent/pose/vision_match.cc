@@ -71,7 +71,12 @@ ImageAlignment ChamferAlign(const cv::Mat& edge_distance, const std::vector<Eige
                             double max_rotation_rad, double rotation_step_rad, int coarse_step) {
   ImageAlignment best;
   best.offset = ChamferOffset(edge_distance, samples, skyline_distance, sky_samples, radius, coarse_step);
-  if (samples.size() < 10) return best;
+  // Too few of the model's edges in view to score a fit: no evidence, never a good fit (issue 19,
+  // eighth session: a relocalisation candidate that saw nearly nothing scored 0 and won, 6 m off).
+  if (samples.size() < 10) {
+    best.score_px = std::numeric_limits<double>::infinity();
+    return best;
+  }
   const bool use_sky = sky_samples.size() >= 5;
   auto score = [&](const std::vector<Eigen::Vector2d>& edge, const std::vector<Eigen::Vector2d>& sky, int dx, int dy) {
     return MeanDistance(edge_distance, edge, dx, dy) + (use_sky ? MeanDistance(skyline_distance, sky, dx, dy) : 0.0);

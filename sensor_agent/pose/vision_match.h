@@ -43,7 +43,9 @@ Eigen::Vector2d ChamferOffset(const cv::Mat& edge_distance, const std::vector<Ei
 struct ImageAlignment {
   Eigen::Vector2d offset = Eigen::Vector2d::Zero();
   double rotation_rad = 0;
-  double score_px = 0;  // the chamfer score at the best motion (mean truncated edge distance, sky term added)
+  // The chamfer score at the best motion (mean truncated edge distance, sky term added); +infinity
+  // when fewer than 10 edge samples are in view (nothing to score).
+  double score_px = 0;
   Eigen::Vector2d Apply(const Eigen::Vector2d& uv, const Eigen::Vector2d& centre) const {
     const double c = std::cos(rotation_rad), s = std::sin(rotation_rad);
     const Eigen::Vector2d d = uv - centre;

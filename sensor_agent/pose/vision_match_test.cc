@@ -87,7 +87,7 @@ TEST(ChamferAlign, NoTurnWhenTheFrameIsNotTurned) {
 }
 
 // Hard cases: too few samples, samples all off the frame, and an empty (edgeless) frame give the
-// identity with a finite score, never NaN.
+// identity, never a NaN score (+infinity for too few samples: nothing to score).
 TEST(ChamferAlign, DegenerateInputsGiveTheIdentity) {
   const Eigen::Vector2d centre(319.5, 239.5);
   cv::Mat edge_distance, skyline_distance;
@@ -99,7 +99,9 @@ TEST(ChamferAlign, DegenerateInputsGiveTheIdentity) {
     const ImageAlignment a = ChamferAlign(edge_distance, samples, skyline_distance, {}, 60, centre, 3 * kPi / 180, 0.5 * kPi / 180);
     EXPECT_EQ(a.rotation_rad, 0.0);
     EXPECT_EQ(a.offset, Eigen::Vector2d::Zero());
-    EXPECT_TRUE(std::isfinite(a.score_px));
+    EXPECT_FALSE(std::isnan(a.score_px));
+    // Two samples are nothing to score: never a good fit (a relocalisation candidate must not win by it).
+    EXPECT_EQ(std::isinf(a.score_px), samples.size() < 10);
   }
 }
 

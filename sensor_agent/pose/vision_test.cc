@@ -175,6 +175,36 @@ TEST_F(VisionTest, RelocalisationFindsACameraMetresFromItsGpsPosition) {
   EXPECT_GT(px_off, 2 * px) << "without the search the first frame stays off (" << error_off_m << " m)";
 }
 
+// Issue 19, eighth session: a GPS height 1.2 m low, taken on far façades as a pitch, left the pose
+// low and pitched. A carried camera's height above the static model's ground (carrier_height_m)
+// lifts it on the first frame. A filter under the ground finds no ground below and applies nothing.
+TEST_F(VisionTest, ACarriedCameraIsHeldAtItsHeightAboveTheGround) {
+  const scene::CameraSpec& camera = *scenario_->world.FindCamera("backpack");
+  const sim::SimulatedCamera sim_camera(scenario_->world, camera, scenario_->EffectsForCamera("backpack"), scenario_->seed);
+  const sim::SimImage frame = sim_camera.Frame(120, 4.0);
+  const Rigid3d truth = sim_camera.PoseAt(4.0);
+  auto run = [&](double carrier_height_m, double dz_m) {
+    VisionOptions options;
+    options.carrier_height_m = carrier_height_m;
+    VisionTracker vision(CampusFeatureMap(scenario_->world), scene::BuildStaticMesh(scenario_->world, 2.0), camera.intrinsics, options);
+    PoseEkf ekf;
+    ekf.Initialize(0, Rigid3d(SO3Exp(Eigen::Vector3d(0.3 * kDeg, 0, 0)) * truth.rotation, truth.translation + Eigen::Vector3d(0.2, -0.2, dz_m)), 0.6,
+                   1 * kDeg);
+    const VisionFrameStats stats = vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
+    EXPECT_TRUE(ekf.covariance().allFinite());
+    return std::make_pair(stats.height_applied, std::abs(ekf.world_from_camera().translation.z() - truth.translation.z()));
+  };
+  const auto [applied, error_m] = run(camera.path->height_m, -1.2);
+  const auto [applied_off, error_off_m] = run(0, -1.2);
+  EXPECT_TRUE(applied);
+  EXPECT_FALSE(applied_off);
+  EXPECT_LT(error_m, 0.25);
+  EXPECT_LT(error_m, 0.5 * error_off_m) << "without the carried height the first frame stays " << error_off_m << " m off";
+  const auto [applied_under, error_under_m] = run(camera.path->height_m, -6.0);
+  EXPECT_FALSE(applied_under) << "no ground below a filter under the terrain";
+  EXPECT_GT(error_under_m, 1.0);
+}
+
 // Issue 19, sixth session: a keyframe on which the model's outline lies nowhere (here the frame
 // upside down) applies nothing, and says so; the pose keeps its prediction. With relocalisation on,
 // the search does not move the filter to such a fit either.

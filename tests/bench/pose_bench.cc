@@ -83,6 +83,11 @@ struct PoseBenchOptions {
   double feature_bias_px = pose::VisionOptions{}.feature_bias_px;
   double feature_point_bias_px = pose::VisionOptions{}.feature_point_bias_px;  // issue 19 (pose19e)
   double acquisition_association_px = pose::VisionOptions{}.acquisition_association_px;
+  // Issue 19, eighth session: the carried camera's height above the ground (VisionOptions::
+  // carrier_height_m); < 0: the camera path's own (the backpack walker's 1.7 m), 0: off.
+  double carrier_height_m = -1;
+  double carrier_height_sigma_m = pose::VisionOptions{}.carrier_height_sigma_m;
+  double carrier_height_correlation_s = pose::VisionOptions{}.carrier_height_correlation_s;
   double nis_short_gain = pose::VisionOptions{}.nis_short_gain;
   double landmark_bias_px = pose::VisionOptions{}.landmark_bias_px;  // issue 19: reported covariance follows the innovations
   std::string segments = pose::VisionOptions{}.segment_detector == pose::SegmentDetector::kLsd ? "lsd" : "fld";  // issue 19
@@ -517,6 +522,9 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.feature_bias_px = o.feature_bias_px;
     vo.feature_point_bias_px = o.feature_point_bias_px;
     vo.acquisition_association_px = o.acquisition_association_px;
+    vo.carrier_height_m = o.carrier_height_m < 0 ? camera->path->height_m : o.carrier_height_m;
+    vo.carrier_height_sigma_m = o.carrier_height_sigma_m;
+    vo.carrier_height_correlation_s = o.carrier_height_correlation_s;
     vo.nis_short_gain = o.nis_short_gain;
     vo.landmark_bias_px = o.landmark_bias_px;
     vo.segment_detector = o.segments == "fld" ? pose::SegmentDetector::kFastLine : pose::SegmentDetector::kLsd;
@@ -1026,6 +1034,11 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--acquisition-passes", o->acquisition_passes, "coarse passes while acquiring (VisionOptions::acquisition_coarse_passes)")
       ->capture_default_str()
       ->check(ave::cli::Range(1, 10));
+  sub.add_option("--carrier-height", o->carrier_height_m,
+                 "the carried camera's height above the ground in m, applied every frame (VisionOptions::carrier_height_m; -1: the camera path's, 0: off)")
+      ->capture_default_str();
+  sub.add_option("--carrier-height-sigma", o->carrier_height_sigma_m, "its sigma in m (VisionOptions::carrier_height_sigma_m)")->capture_default_str();
+  sub.add_option("--carrier-height-correlation", o->carrier_height_correlation_s, "seconds over which its error is correlated")->capture_default_str();
   sub.add_option("--gps-bias-sigma", o->gps_bias_sigma_m, "GPS multipath as a persisting bias of every fix, sigma per axis in m, a consider term (0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 100.0));
