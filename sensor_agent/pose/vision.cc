@@ -47,6 +47,7 @@ std::string VisionOptions::Check() const {
   if (lost_frames < 0 || !(lost_orientation_sigma_deg >= 0)) return "lost_frames and lost_orientation_sigma_deg must be >= 0";
   if (!(carrier_height_m >= 0) || !(carrier_height_sigma_m > 0) || !(carrier_height_correlation_s >= 0))
     return "carrier_height_m and carrier_height_correlation_s must be >= 0 and carrier_height_sigma_m > 0";
+  if (!(feature_point_bias_near_px >= 0) || !(feature_point_near_m >= 0)) return "feature_point_bias_near_px and feature_point_near_m must be >= 0";
   if (!(tracked_sigma_px >= 0)) return "tracked_sigma_px must be >= 0";
   if (!(tracked_max_innovation_px >= 0)) return "tracked_max_innovation_px must be >= 0";
   if (!(landmark_sigma_px >= 0)) return "landmark_sigma_px must be >= 0";
@@ -207,16 +208,18 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
 // 0. A carried camera's height (VisionOptions::carrier_height_m): the static model's ground
 // straight below the filter's position, plus the carrier's height. Only terrain and road count as
 // ground (a bench, a kiosk roof or a tree below is not where the carrier stands).
-void VisionTracker::Impl::ConstrainHeight(PoseEkf& ekf, Frame& f) {
-  if (!(options.carrier_height_m > 0) || (last_height_ns != INT64_MIN && ekf.time_ns() <= last_height_ns)) return;
+void VisionTracker::Impl::ConstrainHeight(PoseEkf& ekf, Frame& f) { f.stats.height_applied = ApplyCarrierHeight(ekf); }
+
+bool VisionTracker::Impl::ApplyCarrierHeight(PoseEkf& ekf) {
+  if (!(options.carrier_height_m > 0) || (last_height_ns != INT64_MIN && ekf.time_ns() <= last_height_ns)) return false;
   const Eigen::Vector3d p = ekf.world_from_camera().translation;
   const std::optional<RayHit> hit = bvh.Raycast(p, Eigen::Vector3d(0, 0, -1), 1e-3, 4 * options.carrier_height_m + 10);
-  if (!hit || hit->triangle >= ground_triangle.size() || !ground_triangle[hit->triangle]) return;
+  if (!hit || hit->triangle >= ground_triangle.size() || !ground_triangle[hit->triangle]) return false;
   const double dt_s = last_height_ns == INT64_MIN ? options.carrier_height_correlation_s : static_cast<double>(ekf.time_ns() - last_height_ns) * 1e-9;
   const double inflation = options.carrier_height_correlation_s > dt_s ? options.carrier_height_correlation_s / dt_s : 1.0;
   const double ground_z = p.z() - hit->distance_m;
-  f.stats.height_applied = ekf.UpdateHeight(ground_z + options.carrier_height_m, options.carrier_height_sigma_m * std::sqrt(inflation)).accepted();
   last_height_ns = ekf.time_ns();
+  return ekf.UpdateHeight(ground_z + options.carrier_height_m, options.carrier_height_sigma_m * std::sqrt(inflation)).accepted();
 }
 
 // 1. KLT: known features matched on the last keyframe and unknown features, from their
@@ -388,7 +391,7 @@ void VisionTracker::Impl::UpdateTrackedPoints(PoseEkf& ekf, Frame& f) {
       }
     }
     const UpdateResult r = ekf.UpdatePoint(k, p, f.known_uv[i], options.tracked_sigma_px * options.tracked_sigma_px,
-                                           {{{BiasId(known[i].index), options.feature_point_bias_px}, {SharedBiasId(), options.feature_shared_bias_px}}});
+                                           {{{BiasId(known[i].index), PointBiasPx(known[i].index, ekf.world_from_camera().translation)}, {SharedBiasId(), options.feature_shared_bias_px}}});
     Count(r, f.stats.points_used, f.stats);
     if (r.accepted()) kept.push_back(known[i]);
   }

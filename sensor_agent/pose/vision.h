@@ -201,6 +201,14 @@ struct VisionOptions {
   // the 10 % of matches 3-20 px off, which persist too): 0.2 px was the scenario draw's near corners.
   // Over 13 draws NEES in band pooled 68 -> 72 % (0.8 px), 77 % (1.0, with feature_bias_px 0.2 and acquisition_association_px 1), 78 % (1.2).
   double feature_point_bias_px = 1.0;
+  // ... that sigma for points at most feature_point_near_m away, rising linearly to
+  // feature_point_bias_px at twice that distance (issue 19, eighth session: over 13 draws the
+  // persisting part is 0.48 px RMS per axis nearer than 60 m, 0.54 at 60-120 m, 0.89 beyond; the
+  // near corners carry the position). Equal to feature_point_bias_px: one sigma at every depth,
+  // the default: 0.5 near moved frames from below the band to above it (13 draws pooled 89.8 ->
+  // 89.2 %: below 6.9 -> 4.8 %, above 3.3 -> 6.1 %).
+  double feature_point_bias_near_px = 1.0;
+  double feature_point_near_m = 60;
   // The acquisition's association errors (issue 19, session pose19e): until the lock holds
   // (lock_frames), the full matchings start from the GPS + AHRS prior, several pixels off, and a
   // point may be matched to the wrong corner, the same wrong one frame after frame (on the campus:

@@ -2,6 +2,7 @@
 // Internal to the vision front end (vision.cc, vision_keyframe.cc): the tracker's state
 // (VisionTracker::Impl) and the steps of VisionTracker::Update. Includes OpenCV; do not include
 // from public headers (vision.h keeps OpenCV out).
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -136,6 +137,12 @@ struct VisionTracker::Impl {
   bool distorted = false;  // the frames show the lens distortion of the intrinsics
   // The persisting-bias id of known point `index` (VisionOptions::feature_point_bias_px; -1: none).
   int64_t BiasId(int index) const { return options.feature_point_bias_px > 0 ? index : -1; }
+  // Its sigma seen from `camera_centre` (feature_point_bias_near_px near, feature_point_bias_px far).
+  double PointBiasPx(int index, const Eigen::Vector3d& camera_centre) const {
+    const double d = (map.points[index] - camera_centre).norm(), near = options.feature_point_near_m;
+    const double t = near > 0 ? std::clamp((d - near) / near, 0.0, 1.0) : 1.0;
+    return options.feature_point_bias_near_px + t * (options.feature_point_bias_px - options.feature_point_bias_near_px);
+  }
   // The id of the bias every known point shares (VisionOptions::feature_shared_bias_px; -1: none).
   int64_t SharedBiasId() const { return options.feature_shared_bias_px > 0 ? static_cast<int64_t>(map.points.size()) + 1 : -1; }
   cv::Matx33d K;
@@ -203,6 +210,7 @@ struct VisionTracker::Impl {
 
   // Relocalisation: moves the filter to the best chamfer fit on a grid of positions around its own.
   void ConstrainHeight(PoseEkf& ekf, Frame& f);
+  bool ApplyCarrierHeight(PoseEkf& ekf);  // true when applied
   bool Relocalize(PoseEkf& ekf, const cv::Mat& edge_distance, const cv::Mat& skyline_distance, double roll_search, double roll_step);
   // Known points the filter's pose predicts visible, skyline corners first.
   std::vector<Prediction> PredictPoints(const PoseEkf& ekf);

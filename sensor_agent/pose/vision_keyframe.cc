@@ -68,6 +68,10 @@ bool VisionTracker::Impl::Relocalize(PoseEkf& ekf, const cv::Mat& edge_distance,
   }
   if (!(best < at_here - options.relocalize_margin_px) || (options.max_alignment_score_px > 0 && best > options.max_alignment_score_px)) return false;
   ekf.MovePosition(best_position, step);
+  // The move forgot what the filter knew of its position, the carried camera's height included
+  // (draw 5 of 13: 1.2 m low again, taken as a 1 deg pitch): that measurement again, at full weight.
+  last_height_ns = INT64_MIN;
+  (void)ApplyCarrierHeight(ekf);
   return true;
 }
 
@@ -308,7 +312,7 @@ void VisionTracker::Impl::ApplyFineMatches(PoseEkf& ekf, Frame& f, const std::ve
     const PointBias second = acquiring_association
                                  ? PointBias{static_cast<int64_t>(map.points.size()) + 2 + index, options.acquisition_association_px}
                                  : PointBias{SharedBiasId(), options.feature_shared_bias_px};
-    const UpdateResult r = ekf.UpdatePoint(k, map.points[index], uv, acquiring_var, {{{BiasId(index), options.feature_point_bias_px}, second}});
+    const UpdateResult r = ekf.UpdatePoint(k, map.points[index], uv, acquiring_var, {{{BiasId(index), PointBiasPx(index, ekf.world_from_camera().translation)}, second}});
     Count(r, f.stats.points_used, f.stats);
     if (r.accepted()) known.push_back({index, f.frame_corners[j], f.frame_corners[j]});
   }

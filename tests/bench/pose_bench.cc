@@ -82,6 +82,7 @@ struct PoseBenchOptions {
   double acquisition_sigma_deg = pose::VisionOptions{}.acquisition_orientation_sigma_deg;
   double feature_bias_px = pose::VisionOptions{}.feature_bias_px;
   double feature_point_bias_px = pose::VisionOptions{}.feature_point_bias_px;  // issue 19 (pose19e)
+  double feature_point_bias_near_px = pose::VisionOptions{}.feature_point_bias_near_px;  // issue 19, eighth session
   double acquisition_association_px = pose::VisionOptions{}.acquisition_association_px;
   // Issue 19, eighth session: the carried camera's height above the ground (VisionOptions::
   // carrier_height_m); < 0: the camera path's own (the backpack walker's 1.7 m), 0: off.
@@ -521,6 +522,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.acquisition_orientation_sigma_deg = o.acquisition_sigma_deg;
     vo.feature_bias_px = o.feature_bias_px;
     vo.feature_point_bias_px = o.feature_point_bias_px;
+    vo.feature_point_bias_near_px = o.feature_point_bias_near_px;
     vo.acquisition_association_px = o.acquisition_association_px;
     vo.carrier_height_m = o.carrier_height_m < 0 ? camera->path->height_m : o.carrier_height_m;
     vo.carrier_height_sigma_m = o.carrier_height_sigma_m;
@@ -977,6 +979,10 @@ Runner AddPoseBench(CLI::App& sub) {
                  "persisting detection bias the known features share, px: the orientation term of the reported covariance (issue 19; 0: off)")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 10.0));
+  sub.add_option("--feature-point-bias-near-px", o->feature_point_bias_near_px,
+                 "... its sigma for points within 60 m, rising to --feature-point-bias-px at 120 m (equal: one sigma at every depth)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 10.0));
   sub.add_option("--feature-point-bias-px", o->feature_point_bias_px,
                  "persisting detection bias of each known point, px, its effect on the pose followed exactly (issue 19, pose19e; 0: off)")
       ->capture_default_str()
