@@ -404,7 +404,9 @@ TEST_F(VisionTest, LargerInnovationsThanUsualScaleTheReportedCovariance) {
   }
   const double steady_nis = *std::max_element(nis.begin() + 10, nis.begin() + 25);
   EXPECT_GT(nis[25], 2 * steady_nis) << "the shifted frame's innovations";
-  EXPECT_EQ(*std::max_element(scale.begin() + 10, scale.begin() + 25), 1.0) << "no scale while the frames agree";
+  // (Tracked features at tracked_sigma_px 0.6 leave the frames' NIS noisier than at 1.0: a few
+  // per cent of scale while the frames agree.)
+  EXPECT_LT(*std::max_element(scale.begin() + 10, scale.begin() + 25), 1.15) << "barely a scale while the frames agree";
   EXPECT_GT(*std::max_element(scale.begin() + 25, scale.begin() + 29), 1.5);
   EXPECT_EQ(*std::min_element(scale.begin() + 29, scale.begin() + 34), 1.0) << "back to the filter's own covariance";
 }
