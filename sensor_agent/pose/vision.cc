@@ -208,7 +208,11 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
 // 0. A carried camera's height (VisionOptions::carrier_height_m): the static model's ground
 // straight below the filter's position, plus the carrier's height. Only terrain and road count as
 // ground (a bench, a kiosk roof or a tree below is not where the carrier stands).
-void VisionTracker::Impl::ConstrainHeight(PoseEkf& ekf, Frame& f) { f.stats.height_applied = ApplyCarrierHeight(ekf); }
+void VisionTracker::Impl::ConstrainHeight(PoseEkf& ekf, Frame& f) {
+  if (!(options.carrier_height_m > 0)) return;
+  f.stats.height_applied = ApplyCarrierHeight(ekf);
+  f.timer.Lap(kStageVisibility);  // a ray cast (and one scalar update)
+}
 
 bool VisionTracker::Impl::ApplyCarrierHeight(PoseEkf& ekf) {
   if (!(options.carrier_height_m > 0) || (last_height_ns != INT64_MIN && ekf.time_ns() <= last_height_ns)) return false;
