@@ -173,6 +173,11 @@ struct VisionOptions {
   double relocalize_extent_m = 3;
   double relocalize_step_m = 1;
   double relocalize_margin_px = 0.5;
+  // ... and by this much the best fit farther than 1.5 steps from it (a flat score landscape: no
+  // move; issue 19, eighth session). Draw 11 of 13 scored 5.3-7.8 px over the whole grid and moved
+  // 2.6 m the wrong way: at 0.3 it stays (p95 13.9 -> 2.6 px) and no other draw changes; at 0.5 draw 8's
+  // needed move is refused (p95 5.3 px), at 1.0 draw 5's too (lost). A thin margin: 0: off.
+  double relocalize_distinct_px = 0.3;
   // Persisting detection bias of the known features (issue 19, docs/POSE.md "NEES by cause"): a
   // rendered or real building corner is found 0.2-0.4 px off its model point the same way at every
   // keyframe and along every track, so no number of sightings averages it away, and the

@@ -40,12 +40,14 @@ bool VisionTracker::Impl::Relocalize(PoseEkf& ekf, const cv::Mat& edge_distance,
   const double at_here = fit(here);
   double best = at_here;
   Eigen::Vector3d best_position = here;
+  std::vector<std::pair<Eigen::Vector3d, double>> grid = {{here, at_here}};
   const int n = static_cast<int>(std::floor(options.relocalize_extent_m / options.relocalize_step_m + 1e-9));
   for (int i = -n; i <= n; ++i) {
     for (int j = -n; j <= n; ++j) {
       if (i == 0 && j == 0) continue;
       const Eigen::Vector3d position = here + options.relocalize_step_m * Eigen::Vector3d(i, j, 0);
       const double score = fit(position);
+      grid.emplace_back(position, score);
       if (score < best) best = score, best_position = position;
     }
   }
@@ -67,6 +69,12 @@ bool VisionTracker::Impl::Relocalize(PoseEkf& ekf, const cv::Mat& edge_distance,
     }
   }
   if (!(best < at_here - options.relocalize_margin_px) || (options.max_alignment_score_px > 0 && best > options.max_alignment_score_px)) return false;
+  if (options.relocalize_distinct_px > 0) {
+    double elsewhere = std::numeric_limits<double>::infinity();
+    for (const auto& [position, score] : grid)
+      if ((position - best_position).norm() > 1.5 * options.relocalize_step_m) elsewhere = std::min(elsewhere, score);
+    if (!(best < elsewhere - options.relocalize_distinct_px)) return false;
+  }
   ekf.MovePosition(best_position, step);
   // The move forgot what the filter knew of its position, the carried camera's height included
   // (draw 5 of 13: 1.2 m low again, taken as a 1 deg pitch): that measurement again, at full weight.

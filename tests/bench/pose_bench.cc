@@ -74,6 +74,7 @@ struct PoseBenchOptions {
   double max_alignment_score_px = pose::VisionOptions{}.max_alignment_score_px;
   double relocalize_extent_m = pose::VisionOptions{}.relocalize_extent_m;
   double relocalize_step_m = pose::VisionOptions{}.relocalize_step_m;
+  double relocalize_distinct_px = pose::VisionOptions{}.relocalize_distinct_px;
   double gyro_correlation_s = pose::PoseFilterOptions{}.gyro_correlation_s;  // issue 19
   double acquiring_sigma_px = pose::VisionOptions{}.acquiring_sigma_px;  // issue 19
   double gyro_sigma_rad_s = pose::PoseFilterOptions{}.gyro_sigma_rad_s;
@@ -518,6 +519,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.max_alignment_score_px = o.max_alignment_score_px;
     vo.relocalize_extent_m = o.relocalize_extent_m;
     vo.relocalize_step_m = o.relocalize_step_m;
+    vo.relocalize_distinct_px = o.relocalize_distinct_px;
     vo.acquisition_roll_search_deg = o.roll_search_deg;
     vo.acquisition_orientation_sigma_deg = o.acquisition_sigma_deg;
     vo.feature_bias_px = o.feature_bias_px;
@@ -1040,6 +1042,9 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--acquisition-passes", o->acquisition_passes, "coarse passes while acquiring (VisionOptions::acquisition_coarse_passes)")
       ->capture_default_str()
       ->check(ave::cli::Range(1, 10));
+  sub.add_option("--relocalize-distinct", o->relocalize_distinct_px,
+                 "relocalisation moves only when its best fit beats every fit farther than 1.5 steps by this, px (0: off)")
+      ->capture_default_str();
   sub.add_option("--carrier-height", o->carrier_height_m,
                  "the carried camera's height above the ground in m, applied every frame (VisionOptions::carrier_height_m; -1: the camera path's, 0: off)")
       ->capture_default_str();
