@@ -156,9 +156,10 @@ TEST_F(VisionTest, RelocalisationFindsACameraMetresFromItsGpsPosition) {
   const sim::SimImage frame = sim_camera.Frame(120, 4.0);
   const Rigid3d truth = sim_camera.PoseAt(4.0);
   const Rigid3d start(SO3Exp(Eigen::Vector3d(0.2 * kDeg, 0.3 * kDeg, -0.2 * kDeg)) * truth.rotation, truth.translation + Eigen::Vector3d(2.3, -1.6, 0));
-  auto run = [&](double extent_m) {
+  auto run = [&](double extent_m, double distinct_px = VisionOptions().relocalize_distinct_px) {
     VisionOptions options;
     options.relocalize_extent_m = extent_m;
+    options.relocalize_distinct_px = distinct_px;
     VisionTracker vision(CampusFeatureMap(scenario_->world), scene::BuildStaticMesh(scenario_->world, 2.0), camera.intrinsics, options);
     PoseEkf ekf;
     ekf.Initialize(0, start, 0.3, 1 * kDeg);
@@ -172,6 +173,11 @@ TEST_F(VisionTest, RelocalisationFindsACameraMetresFromItsGpsPosition) {
   EXPECT_LT(px, 2.0);
   const auto [moved_off, error_off_m, px_off] = run(0);
   EXPECT_FALSE(moved_off);
+  // A best fit that does not stand out from the rest of the grid by relocalize_distinct_px is no
+  // reason to move (a flat score landscape: draw 11 of 13 moved 2.6 m the wrong way).
+  const auto [moved_flat, error_flat_m, px_flat] = run(VisionOptions().relocalize_extent_m, 100.0);
+  EXPECT_FALSE(moved_flat);
+  EXPECT_NEAR(error_flat_m, std::hypot(2.3, 1.6), 0.5) << "stays near the start";
   EXPECT_GT(px_off, 2 * px) << "without the search the first frame stays off (" << error_off_m << " m)";
 }
 
@@ -192,6 +198,8 @@ TEST_F(VisionTest, ACarriedCameraIsHeldAtItsHeightAboveTheGround) {
                    1 * kDeg);
     const VisionFrameStats stats = vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
     EXPECT_TRUE(ekf.covariance().allFinite());
+    // The same frame again at the same filter time (dt = 0): the height is applied once per time.
+    EXPECT_FALSE(vision.Update(frame.bgr.data(), frame.width, frame.height, ekf).height_applied);
     return std::make_pair(stats.height_applied, std::abs(ekf.world_from_camera().translation.z() - truth.translation.z()));
   };
   const auto [applied, error_m] = run(camera.path->height_m, -1.2);
