@@ -134,9 +134,18 @@ UpdateResult PoseEkf::Predict(int64_t t_ns) {
 
 template <int M>
 UpdateResult PoseEkf::Correct(const Eigen::Matrix<double, M, 1>& innovation, const Eigen::Matrix<double, M, kErrorDim>& H,
-                              const Eigen::Matrix<double, M, M>& R, double gate_chi2) {
+                              const Eigen::Matrix<double, M, M>& R, double gate_chi2, const Eigen::Matrix<double, M, M>* gate_R) {
   if (!AllFinite(innovation) || !AllFinite(H) || !AllFinite(R)) return {Rejection::kNotFinite, 0};
   const Eigen::Matrix<double, kErrorDim, M> PHt = P_ * H.transpose();
+  if (gate_R) {
+    const Eigen::Matrix<double, M, M> gate_S = H * PHt + *gate_R;
+    const Eigen::LDLT<Eigen::Matrix<double, M, M>> gate_ldlt(gate_S);
+    if (gate_ldlt.info() != Eigen::Success || !(gate_ldlt.vectorD().array() > 0).all()) return {Rejection::kNotFinite, 0};
+    const double gate_d2 = innovation.dot(gate_ldlt.solve(innovation));
+    if (!std::isfinite(gate_d2)) return {Rejection::kNotFinite, 0};
+    if (gate_d2 > gate_chi2) return {Rejection::kGate, gate_d2};
+  }
+  double reported_d2 = 0;  // the innovation's squared Mahalanobis distance at the gate's covariance
   const Eigen::Matrix<double, M, M> S = H * PHt + R;
   const Eigen::LDLT<Eigen::Matrix<double, M, M>> ldlt(S);
   if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().array() > 0).all()) return {Rejection::kNotFinite, 0};
@@ -150,7 +159,8 @@ UpdateResult PoseEkf::Correct(const Eigen::Matrix<double, M, 1>& innovation, con
   };
   const double d2 = innovation.dot(solve(innovation));
   if (!std::isfinite(d2)) return {Rejection::kNotFinite, 0};
-  if (d2 > gate_chi2) return {Rejection::kGate, d2};
+  reported_d2 = gate_R ? innovation.dot(Eigen::LDLT<Eigen::Matrix<double, M, M>>(H * PHt + *gate_R).solve(innovation)) : d2;
+  if (!gate_R && d2 > gate_chi2) return {Rejection::kGate, d2};
   const Eigen::Matrix<double, kErrorDim, M> K = solve(PHt.transpose()).transpose();
   if (!landmark_ids_.empty()) {
     const Eigen::Matrix<double, Eigen::Dynamic, M> KL = solve((cross_.transpose() * H.transpose()).transpose()).transpose();
@@ -161,7 +171,7 @@ UpdateResult PoseEkf::Correct(const Eigen::Matrix<double, M, 1>& innovation, con
   CorrectBiases<M>(K, H);
   Inject(K * innovation);
   Condition();
-  return {Rejection::kNone, d2};
+  return {Rejection::kNone, reported_d2};
 }
 
 void PoseEkf::Inject(const StateVector& dx) {
@@ -481,8 +491,10 @@ int PoseEkf::BiasIndex(int64_t id, double sigma_px) {
 }
 
 UpdateResult PoseEkf::UpdatePoint(const PinholeIntrinsics& k, const Eigen::Vector3d& point_in_world, const Eigen::Vector2d& uv,
-                                  double extra_variance_px2, std::array<PointBias, 2> biases) {
-  if (!uv.allFinite() || !point_in_world.allFinite() || !std::isfinite(extra_variance_px2)) return {Rejection::kNotFinite, 0};
+                                  double extra_variance_px2, std::array<PointBias, 2> biases, double variance_scale) {
+  if (!uv.allFinite() || !point_in_world.allFinite() || !std::isfinite(extra_variance_px2) || !std::isfinite(variance_scale)) {
+    return {Rejection::kNotFinite, 0};
+  }
   Eigen::Matrix<double, 2, kErrorDim> H;
   const std::optional<Eigen::Vector2d> predicted = ProjectPoint(k, point_in_world, &H);
   if (!predicted) return {Rejection::kBehindCamera, 0};
@@ -492,7 +504,10 @@ UpdateResult PoseEkf::UpdatePoint(const PinholeIntrinsics& k, const Eigen::Vecto
     const PointBias& b = biases[i];
     if (b.id >= 0 && std::isfinite(b.sigma_px) && b.sigma_px > 0 && (i == 0 || b.id != biases[0].id)) current_biases_[i] = BiasIndex(b.id, b.sigma_px);
   }
-  const UpdateResult r = Correct<2>(uv - *predicted, H, Eigen::Matrix2d::Identity() * var, options_.gate_chi2_2dof);
+  const Eigen::Matrix2d R = Eigen::Matrix2d::Identity() * var;
+  const Eigen::Matrix2d scaled = R * std::max(1.0, variance_scale);
+  const UpdateResult r = variance_scale > 1 ? Correct<2>(uv - *predicted, H, scaled, options_.gate_chi2_2dof, &R)
+                                            : Correct<2>(uv - *predicted, H, R, options_.gate_chi2_2dof);
   current_biases_ = {-1, -1};
   return r;
 }

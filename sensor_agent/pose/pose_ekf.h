@@ -161,8 +161,11 @@ class PoseEkf {
   // prediction, update and reset; the bias a measurement carries adds -K) and PoseCovariance()
   // reports P + sum_id sigma_id^2 G_id G_id', the covariance the filter's error has when such
   // errors are not independent from sighting to sighting. See ConsideredBiasCovariance().
+  // `variance_scale` (>= 1; issue 19, ninth session): a robust weight, the pixel variance scaled
+  // for the update only; the gate tests the innovation at the unscaled variance, so a down-weighted
+  // match is refused exactly when an unweighted one would be.
   UpdateResult UpdatePoint(const PinholeIntrinsics& k, const Eigen::Vector3d& point_in_world, const Eigen::Vector2d& uv,
-                           double extra_variance_px2 = 0, std::array<PointBias, 2> biases = {});
+                           double extra_variance_px2 = 0, std::array<PointBias, 2> biases = {}, double variance_scale = 1);
   // A 3D line seen as the image segment (a, b): residual = signed pixel distances of a and b from
   // the projected infinite line.
   UpdateResult UpdateLine(const PinholeIntrinsics& k, const Line3d& line, const Eigen::Vector2d& a, const Eigen::Vector2d& b,
@@ -247,8 +250,9 @@ class PoseEkf {
 
  private:
   template <int M>
+  // `gate_R`: the measurement covariance the gate tests with (nullptr: R).
   UpdateResult Correct(const Eigen::Matrix<double, M, 1>& innovation, const Eigen::Matrix<double, M, kErrorDim>& H,
-                       const Eigen::Matrix<double, M, M>& R, double gate_chi2);
+                       const Eigen::Matrix<double, M, M>& R, double gate_chi2, const Eigen::Matrix<double, M, M>* gate_R = nullptr);
   void Inject(const StateVector& dx);
   void Condition();
   int LandmarkIndex(int64_t id) const;

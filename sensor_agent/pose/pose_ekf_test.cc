@@ -295,6 +295,39 @@ TEST(PoseEkf, AHeightMeasurementMovesTheHeightAloneAndOutliersAreRefused) {
   EXPECT_TRUE(after.isApprox(after.transpose(), 1e-12));
 }
 
+// Issue 19, ninth session: a robust weight (UpdatePoint's variance_scale) scales the point's
+// pixel variance for the update only. The update moves the pose as an update at the scaled
+// variance does, the gate tests at the unscaled one (a match the plain update refuses stays
+// refused however far it is down-weighted), and the reported squared distance is the unscaled one.
+TEST(PoseEkf, ARobustWeightScalesTheUpdateButNotTheGate) {
+  const PoseEkf start = Filter(Rigid3d(), 0.02, 0.05 * kDeg);  // a locked pose: the pixel noise dominates
+  const Eigen::Vector3d point(1, -0.5, 20);
+  const Eigen::Vector2d predicted = *start.ProjectPoint(Camera(), point);
+  const double var = start.options().pixel_sigma_px * start.options().pixel_sigma_px;
+  const Eigen::Vector2d near = predicted + Eigen::Vector2d(3, -2);
+
+  PoseEkf weighted = start, plain = start, scaled = start;
+  const UpdateResult w = weighted.UpdatePoint(Camera(), point, near, 0, {}, 4.0);
+  const UpdateResult p = plain.UpdatePoint(Camera(), point, near);
+  ASSERT_TRUE(w.accepted());
+  ASSERT_TRUE(p.accepted());
+  ASSERT_TRUE(scaled.UpdatePoint(Camera(), point, near, 3 * var).accepted());  // the variance x 4
+  EXPECT_TRUE(weighted.world_from_camera().translation.isApprox(scaled.world_from_camera().translation, 1e-12));
+  EXPECT_TRUE(weighted.covariance().isApprox(scaled.covariance(), 1e-12));
+  const double moved = (weighted.world_from_camera().translation - start.world_from_camera().translation).norm();
+  EXPECT_LT(moved, 0.5 * (plain.world_from_camera().translation - start.world_from_camera().translation).norm());
+  EXPECT_GT(moved, 0);
+  EXPECT_NEAR(w.mahalanobis_sq, p.mahalanobis_sq, 1e-9);  // the unscaled distance
+
+  // Far enough for the plain gate: refused at every weight, and nothing changes.
+  const Eigen::Vector2d far = predicted + Eigen::Vector2d(400, 0);
+  PoseEkf refused = start;
+  ASSERT_EQ(PoseEkf(start).UpdatePoint(Camera(), point, far).rejection, Rejection::kGate);
+  for (double scale : {1.0, 10.0, 1e6}) EXPECT_EQ(refused.UpdatePoint(Camera(), point, far, 0, {}, scale).rejection, Rejection::kGate) << scale;
+  EXPECT_EQ(refused.covariance(), start.covariance());
+  EXPECT_EQ(refused.UpdatePoint(Camera(), point, near, 0, {}, std::nan("")).rejection, Rejection::kNotFinite);
+}
+
 TEST(PoseEkf, TimeMustNotGoBackwardsAndZeroDtIsANoOp) {
   PoseEkf ekf = Filter(Rigid3d());
   ASSERT_TRUE(ekf.Predict(1'000'000'000).accepted());

@@ -396,7 +396,9 @@ void VisionTracker::Impl::UpdateTrackedPoints(PoseEkf& ekf, Frame& f) {
       }
     }
     const UpdateResult r = ekf.UpdatePoint(k, p, f.known_uv[i], options.tracked_sigma_px * options.tracked_sigma_px,
-                                           {{{BiasId(known[i].index), PointBiasPx(known[i].index, ekf.world_from_camera().translation)}, {SharedBiasId(), options.feature_shared_bias_px}}});
+                                           {{{BiasId(known[i].index), PointBiasPx(known[i].index, ekf.world_from_camera().translation)},
+                                             SharedBias(known[i].index, ekf.world_from_camera().translation)}},
+                                           known[i].variance_scale);
     Count(r, f.stats.points_used, f.stats);
     if (r.accepted()) kept.push_back(known[i]);
   }

@@ -54,6 +54,7 @@ struct KnownTrack {
   int index = 0;      // into FeatureMap::points
   cv::Point2f px;     // in the (distorted) frame
   cv::Point2f key_px;  // where it was on the keyframe, which KLT matches against (no drift)
+  double variance_scale = 1;  // its keyframe match's robust weight (VisionOptions::robust_residual_px), kept along the track
 };
 
 // Charges the CPU time since the last lap to a stage.
@@ -145,6 +146,13 @@ struct VisionTracker::Impl {
   }
   // The id of the bias every known point shares (VisionOptions::feature_shared_bias_px; -1: none).
   int64_t SharedBiasId() const { return options.feature_shared_bias_px > 0 ? static_cast<int64_t>(map.points.size()) + 1 : -1; }
+  // The bias known point `index` shares with others: its class's (above or below the camera,
+  // feature_class_bias_px; ids after the acquisition's) or, without classes, every point's.
+  PointBias SharedBias(int index, const Eigen::Vector3d& camera_centre) const {
+    if (!(options.feature_class_bias_px > 0)) return {SharedBiasId(), options.feature_shared_bias_px};
+    const int64_t n = static_cast<int64_t>(map.points.size());
+    return {2 * n + 2 + (map.points[index].z() > camera_centre.z() ? 1 : 0), options.feature_class_bias_px};
+  }
   cv::Matx33d K;
   cv::Mat distortion;
   // Visibility per static-model feature, computed lazily and reused while the camera stays within
@@ -254,6 +262,7 @@ struct VisionTracker::Impl {
   ImageAlignment AlignModelEdges(PoseEkf& ekf, Frame& f, bool turn);
   PoseEkf CoarsePass(const PoseEkf& ekf, Frame& f, const ImageAlignment& alignment, bool turn);
   void FinePass(PoseEkf& ekf, Frame& f, const PoseEkf& coarse, const std::vector<Segment>& segments);
+  std::vector<double> RobustScales(const PoseEkf& ekf, const Frame& f, const std::vector<std::pair<int, int>>& matches, double acquiring_var) const;
   void ApplyFineMatches(PoseEkf& ekf, Frame& f, const std::vector<std::pair<int, int>>& matches,
                         const std::vector<std::optional<Segment>>& line_matches);
   void UpdateLock(PoseEkf& ekf, Frame& f, const ImageAlignment& alignment, bool acquiring);

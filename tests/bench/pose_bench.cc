@@ -95,6 +95,8 @@ struct PoseBenchOptions {
   double landmark_bias_px = pose::VisionOptions{}.landmark_bias_px;  // issue 19: reported covariance follows the innovations
   std::string segments = pose::VisionOptions{}.segment_detector == pose::SegmentDetector::kLsd ? "lsd" : "fld";  // issue 19
   double feature_shared_bias_px = pose::VisionOptions{}.feature_shared_bias_px;
+  double feature_class_bias_px = pose::VisionOptions{}.feature_class_bias_px;  // issue 19, ninth session
+  double robust_residual_px = pose::VisionOptions{}.robust_residual_px;
   double gyro_bias_sigma_rad_s = pose::PoseFilterOptions{}.gyro_bias_sigma_rad_s;
   bool knobs = true;     // the front end's knobs at 50 features
   bool variants = true;  // the bus and bump scenario variants (need --seconds >= 7.2)
@@ -545,6 +547,8 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.landmark_bias_px = o.landmark_bias_px;
     vo.segment_detector = o.segments == "fld" ? pose::SegmentDetector::kFastLine : pose::SegmentDetector::kLsd;
     vo.feature_shared_bias_px = o.feature_shared_bias_px;
+    vo.feature_class_bias_px = o.feature_class_bias_px;
+    vo.robust_residual_px = o.robust_residual_px;
     vo.use_lines = o.lines;
     if (run.tweak) run.tweak(vo);
     pose::VisionTracker vision(map, mesh, k, vo);
@@ -1073,6 +1077,14 @@ Runner AddPoseBench(CLI::App& sub) {
                  "sigma of each point's persisting association error until the lock holds, px (issue 19, pose19e; 0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 100.0));
+  sub.add_option("--robust-residual-px", o->robust_residual_px,
+                 "keyframes: a known point's match the fitted pose misses by r beyond this has its variance scaled by (r / this)^2 (0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 100.0));
+  sub.add_option("--feature-class-bias-px", o->feature_class_bias_px,
+                 "sigma of a detection bias shared per class of known point (above / below the camera), px (issue 19, ninth session; 0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 10.0));
   sub.add_option("--feature-shared-bias-px", o->feature_shared_bias_px,
                  "sigma of a detection bias every known point shares, px (issue 19, pose19e; 0: off)")
       ->capture_default_str()
