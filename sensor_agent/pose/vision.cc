@@ -50,6 +50,8 @@ std::string VisionOptions::Check() const {
     return "carrier_height_m and carrier_height_correlation_s must be >= 0 and carrier_height_sigma_m > 0";
   if (!(feature_point_bias_near_px >= 0) || !(feature_point_near_m >= 0)) return "feature_point_bias_near_px and feature_point_near_m must be >= 0";
   if (!(tracked_sigma_px >= 0)) return "tracked_sigma_px must be >= 0";
+  if (!(robust_residual_px >= 0 && std::isfinite(robust_residual_px))) return "robust_residual_px must be finite and >= 0";
+  if (!(feature_class_bias_px >= 0 && std::isfinite(feature_class_bias_px))) return "feature_class_bias_px must be finite and >= 0";
   if (!(tracked_max_innovation_px >= 0)) return "tracked_max_innovation_px must be >= 0";
   if (!(landmark_sigma_px >= 0)) return "landmark_sigma_px must be >= 0";
   if (!(landmark_bias_px >= 0 && std::isfinite(landmark_bias_px))) return "landmark_bias_px must be finite and >= 0";

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <cstdio>
 #include <cstdlib>
 #include <map>
@@ -515,6 +516,14 @@ TEST(VisionOptions, CheckNamesTheBadField) {
   o = VisionOptions();
   o.nis_scale_cap = 0.5;
   EXPECT_THAT(o.Check(), ::testing::HasSubstr("nis_scale_cap"));
+  o = VisionOptions();
+  o.robust_residual_px = -1;
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("robust_residual_px"));
+  o.robust_residual_px = std::numeric_limits<double>::infinity();
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("robust_residual_px"));
+  o = VisionOptions();
+  o.feature_class_bias_px = std::nan("");
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("feature_class_bias_px"));
 }
 
 }  // namespace
