@@ -52,6 +52,7 @@ std::string VisionOptions::Check() const {
   if (!(tracked_sigma_px >= 0)) return "tracked_sigma_px must be >= 0";
   if (!(robust_residual_px >= 0 && std::isfinite(robust_residual_px))) return "robust_residual_px must be finite and >= 0";
   if (!(feature_class_bias_px >= 0 && std::isfinite(feature_class_bias_px))) return "feature_class_bias_px must be finite and >= 0";
+  if (!(foot_variance_scale >= 1 && std::isfinite(foot_variance_scale))) return "foot_variance_scale must be finite and >= 1";
   if (!(tracked_max_innovation_px >= 0)) return "tracked_max_innovation_px must be >= 0";
   if (!(landmark_sigma_px >= 0)) return "landmark_sigma_px must be >= 0";
   if (!(landmark_bias_px >= 0 && std::isfinite(landmark_bias_px))) return "landmark_bias_px must be finite and >= 0";
@@ -79,24 +80,79 @@ const char* VisionStageName(int stage) {
   return stage >= 0 && stage < kVisionStageCount ? kNames[stage] : "?";
 }
 
+namespace {
+
+// One rectangular building part's wireframe, as the campus meshes it (scene::PartMesher): its
+// corners at the ground and at the top of each wall, the roof's own vertices, and the edges where
+// faces meet at an angle. A shed's high walls end at the roof's high edge and its side walls'
+// tops slope; a gable end has no eaves (its wall rises to the ridge), and its apex is a corner.
+void AddPart(const scene::SyntheticCampus& campus, const scene::BuildingPart& part, double eave_z, FeatureMap& map) {
+  const double c = std::cos(part.yaw_rad), s = std::sin(part.yaw_rad);
+  const Eigen::Vector2d ax(c, s), ay(-s, c);
+  const double hx = 0.5 * part.size_m.x(), hy = 0.5 * part.size_m.y(), ze = eave_z, zt = eave_z + part.roof_height_m;
+  auto at = [&](double x, double y, double z) {
+    const Eigen::Vector2d p = part.center_m + x * ax + y * ay;
+    return Eigen::Vector3d(p.x(), p.y(), z);
+  };
+  auto line = [&](const Eigen::Vector3d& a, const Eigen::Vector3d& b, bool roof_edge = false) {
+    map.lines.push_back({{b, (b - a).normalized()}, a, b, roof_edge});
+  };
+  using scene::PrimitiveKind;
+  const std::array<Eigen::Vector2d, 4> corners = {Eigen::Vector2d(-hx, -hy), Eigen::Vector2d(hx, -hy), Eigen::Vector2d(hx, hy), Eigen::Vector2d(-hx, hy)};
+  std::array<Eigen::Vector3d, 4> tops;
+  for (size_t i = 0; i < corners.size(); ++i) {
+    const Eigen::Vector2d& q = corners[i];
+    const double top_z = part.kind == PrimitiveKind::kShed && q.y() > 0 ? zt : ze;
+    tops[i] = at(q.x(), q.y(), top_z);
+    const Eigen::Vector3d foot(tops[i].x(), tops[i].y(), campus.TerrainHeight(tops[i].x(), tops[i].y()));
+    map.points.push_back(foot);
+    map.points.push_back(tops[i]);
+    map.lines.push_back({{tops[i], Eigen::Vector3d::UnitZ()}, foot, tops[i]});
+  }
+  switch (part.kind) {
+    case PrimitiveKind::kGable:  // eaves along x; rakes up to the apexes over the gable ends; the ridge
+      line(tops[0], tops[1]);
+      line(tops[2], tops[3]);
+      for (double sx : {-hx, hx}) {
+        const Eigen::Vector3d apex = at(sx, 0, zt);
+        map.points.push_back(apex);
+        line(at(sx, -hy, ze), apex, true);
+        line(apex, at(sx, hy, ze), true);
+      }
+      line(at(-hx, 0, zt), at(hx, 0, zt), true);
+      break;
+    case PrimitiveKind::kHip: {  // eaves all round; hips up to the ridge's ends; the ridge
+      for (size_t i = 0; i < 4; ++i) line(tops[i], tops[(i + 1) % 4]);
+      const bool along_x = hx >= hy;
+      const double r = along_x ? hx - hy : hy - hx;
+      const Eigen::Vector3d lo = along_x ? at(-r, 0, zt) : at(0, -r, zt), hi = along_x ? at(r, 0, zt) : at(0, r, zt);
+      map.points.push_back(lo);
+      if (r > 1e-6) {
+        map.points.push_back(hi);
+        line(lo, hi, true);
+      }
+      // Corners 0 (-x, -y), 1 (+x, -y), 2 (+x, +y), 3 (-x, +y): each hip runs to the nearer end.
+      line(tops[0], lo, true);
+      line(tops[1], along_x ? hi : lo, true);
+      line(tops[2], hi, true);
+      line(tops[3], along_x ? lo : hi, true);
+      break;
+    }
+    default:  // box at the eaves all round; a shed's walls' tops, sloping on its sides
+      for (size_t i = 0; i < 4; ++i) line(tops[i], tops[(i + 1) % 4]);
+      break;
+  }
+}
+
+}  // namespace
+
 FeatureMap CampusFeatureMap(const scene::SyntheticCampus& campus) {
   FeatureMap map;
   for (const scene::BoxBuilding& b : campus.buildings) {
     const double ground = campus.BuildingGround(b);
     for (const scene::BuildingPart& part : b.Parts()) {
       if (part.kind == scene::PrimitiveKind::kCylinder || part.kind == scene::PrimitiveKind::kDome) continue;
-      const std::vector<Eigen::Vector2d> corners = scene::FootprintCorners(part);
-      const double eaves = ground + part.height_m;
-      for (size_t i = 0; i < corners.size(); ++i) {
-        const Eigen::Vector2d& c = corners[i];
-        const Eigen::Vector2d& next = corners[(i + 1) % corners.size()];
-        const Eigen::Vector3d foot(c.x(), c.y(), campus.TerrainHeight(c.x(), c.y()));
-        const Eigen::Vector3d top(c.x(), c.y(), eaves), next_top(next.x(), next.y(), eaves);
-        map.points.push_back(foot);
-        map.points.push_back(top);
-        map.lines.push_back({{top, Eigen::Vector3d::UnitZ()}, foot, top});
-        map.lines.push_back({{top, (next_top - top).normalized()}, top, next_top});
-      }
+      AddPart(campus, part, ground + part.height_m, map);
     }
   }
   return map;

@@ -107,7 +107,7 @@ void VisionTracker::Impl::EdgeSamples(const PoseEkf& ekf, std::vector<Eigen::Vec
   for (size_t li = 0; li < map.lines.size(); ++li) {
     const LineFeature& f = map.lines[li];
     const auto a = ekf.ProjectPoint(k, f.a), b = ekf.ProjectPoint(k, f.b);
-    if (!a || !b || !LineMidSeen(static_cast<int>(li), centre)) continue;
+    if (!a || !b || f.roof || !LineMidSeen(static_cast<int>(li), centre)) continue;
     const int steps = static_cast<int>(std::min(2000.0, (*b - *a).norm() / kEdgeSample_px));
     const bool horizontal = std::abs(f.line.direction.z()) < 0.5;
     std::vector<uint8_t>& sky = line_sky_samples[li];
@@ -346,9 +346,10 @@ void VisionTracker::Impl::ApplyFineMatches(PoseEkf& ekf, Frame& f, const std::ve
   // next acquiring frames (each is matched from the pose the last one pulled): a persisting
   // association error per point (acquisition_association_px), ids after the shared one.
   const bool acquiring_association = good_full_matches < options.lock_frames && options.acquisition_association_px > 0;
-  const std::vector<double> scale = RobustScales(ekf, f, matches, acquiring_var);
+  std::vector<double> scale = RobustScales(ekf, f, matches, acquiring_var);
   for (size_t m = 0; m < matches.size(); ++m) {
     const auto& [index, j] = matches[m];
+    if (map.points[index].z() < ekf.world_from_camera().translation.z()) scale[m] *= options.foot_variance_scale;
     const Eigen::Vector2d uv(f.corners[j].x, f.corners[j].y);
     f.stats.point_matches.emplace_back(map.points[index], uv);
     if (f.budget <= 0) continue;

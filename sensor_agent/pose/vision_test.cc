@@ -47,14 +47,66 @@ class VisionTest : public ::testing::Test {
 };
 sim::Scenario* VisionTest::scenario_ = nullptr;
 
-TEST_F(VisionTest, CampusFeatureMapHasCornersAndEdgesOfRectangularParts) {
+// Closest point of triangle abc to p (Ericson, Real-Time Collision Detection, 5.1.5).
+Eigen::Vector3d ClosestOnTriangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+  const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0 && d2 <= 0) return a;
+  const Eigen::Vector3d bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0 && d4 <= d3) return b;
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) return a + ab * (d1 / (d1 - d3));
+  const Eigen::Vector3d cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0 && d5 <= d6) return c;
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) return a + ac * (d2 / (d2 - d6));
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+  const double denom = 1 / (va + vb + vc);
+  return a + ab * (vb * denom) + ac * (vc * denom);
+}
+
+// The feature map is the campus's own wireframe: every point on a building's surface, and every
+// line along an edge where two of its faces meet at an angle (a shed's high wall ends at the
+// roof's high edge, a gable end has no eaves; issue 19, tenth session: the old map put both at the
+// eaves, and their corners were matched 1-2 px off at every keyframe).
+TEST_F(VisionTest, CampusFeatureMapIsTheBuildingsWireframe) {
   const FeatureMap map = CampusFeatureMap(scenario_->world);
-  int rectangular = 0;
-  for (const auto& b : scenario_->world.buildings)
-    for (const auto& part : b.Parts()) rectangular += part.kind != scene::PrimitiveKind::kCylinder && part.kind != scene::PrimitiveKind::kDome;
-  EXPECT_EQ(map.points.size(), 8u * rectangular);
-  EXPECT_EQ(map.lines.size(), 8u * rectangular);
-  for (const auto& l : map.lines) EXPECT_NEAR(l.line.direction.norm(), 1.0, 1e-12);
+  const TriangleMesh mesh = scene::BuildStaticMesh(scenario_->world, 2.0);
+  auto face_normals_near = [&](const Eigen::Vector3d& x) {
+    std::vector<Eigen::Vector3d> normals;
+    for (size_t t = 0; t < mesh.TriangleCount(); ++t) {
+      if (mesh.triangle_object[t] < 0) continue;  // terrain
+      const Eigen::Vector3d a = mesh.positions[mesh.indices[3 * t]].cast<double>(), b = mesh.positions[mesh.indices[3 * t + 1]].cast<double>(),
+                            c = mesh.positions[mesh.indices[3 * t + 2]].cast<double>();
+      if ((ClosestOnTriangle(x, a, b, c) - x).norm() > 0.01) continue;
+      const Eigen::Vector3d n = (b - a).cross(c - a).normalized();
+      if (std::none_of(normals.begin(), normals.end(), [&](const Eigen::Vector3d& m) { return m.dot(n) > std::cos(5 * kDeg); })) normals.push_back(n);
+    }
+    return normals;
+  };
+  int rectangular = 0, sheds = 0, gables = 0;
+  for (const auto& b : scenario_->world.buildings) {
+    for (const auto& part : b.Parts()) {
+      rectangular += part.kind != scene::PrimitiveKind::kCylinder && part.kind != scene::PrimitiveKind::kDome;
+      sheds += part.kind == scene::PrimitiveKind::kShed;
+      gables += part.kind == scene::PrimitiveKind::kGable;
+    }
+  }
+  ASSERT_GT(sheds, 0);
+  ASSERT_GT(gables, 0);
+  EXPECT_GE(map.points.size(), 8u * rectangular);
+  for (const Eigen::Vector3d& p : map.points) EXPECT_FALSE(face_normals_near(p).empty()) << "point " << p.transpose() << " is on no building";
+  for (const LineFeature& l : map.lines) {
+    EXPECT_NEAR(l.line.direction.norm(), 1.0, 1e-12);
+    EXPECT_LT((l.b - l.a).normalized().cross(l.line.direction).norm(), 1e-9);
+    for (double s : {0.25, 0.5, 0.75}) {
+      const Eigen::Vector3d x = l.a + s * (l.b - l.a);
+      EXPECT_GE(face_normals_near(x).size(), 2u) << "line " << l.a.transpose() << " -> " << l.b.transpose() << " is not an edge at " << s;
+    }
+  }
 }
 
 TEST_F(VisionTest, StabilisesAPerturbedBackpackPoseToAFewPixels) {
@@ -524,6 +576,9 @@ TEST(VisionOptions, CheckNamesTheBadField) {
   o = VisionOptions();
   o.feature_class_bias_px = std::nan("");
   EXPECT_THAT(o.Check(), ::testing::HasSubstr("feature_class_bias_px"));
+  o = VisionOptions();
+  o.foot_variance_scale = 0.5;
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("foot_variance_scale"));
 }
 
 }  // namespace
@@ -557,8 +612,7 @@ TEST_F(VisionTest, EavesCornersSitOnTheRenderedBuildingCorners) {
     }
     const int u = static_cast<int>(std::lround(uv->x())), v = static_cast<int>(std::lround(uv->y()));
     if (v < 4 || v + 4 >= frame.height) continue;
-    bool eaves = false;
-    for (size_t i = 1; i < map.points.size(); i += 2) eaves |= map.points[i] == p;
+    const bool eaves = p.z() > scenario_->world.TerrainHeight(p.x(), p.y()) + 1;  // a wall's top or a roof's vertex, not a foot
     if (!eaves) continue;
     ++checked;
     const uint32_t below = frame.object_id[frame.Index(u, v + 3)];

@@ -96,6 +96,7 @@ struct PoseBenchOptions {
   std::string segments = pose::VisionOptions{}.segment_detector == pose::SegmentDetector::kLsd ? "lsd" : "fld";  // issue 19
   double feature_shared_bias_px = pose::VisionOptions{}.feature_shared_bias_px;
   double feature_class_bias_px = pose::VisionOptions{}.feature_class_bias_px;  // issue 19, ninth session
+  double foot_variance_scale = pose::VisionOptions{}.foot_variance_scale;      // issue 19, tenth session
   double robust_residual_px = pose::VisionOptions{}.robust_residual_px;
   double gyro_bias_sigma_rad_s = pose::PoseFilterOptions{}.gyro_bias_sigma_rad_s;
   bool knobs = true;     // the front end's knobs at 50 features
@@ -548,6 +549,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.segment_detector = o.segments == "fld" ? pose::SegmentDetector::kFastLine : pose::SegmentDetector::kLsd;
     vo.feature_shared_bias_px = o.feature_shared_bias_px;
     vo.feature_class_bias_px = o.feature_class_bias_px;
+    vo.foot_variance_scale = o.foot_variance_scale;
     vo.robust_residual_px = o.robust_residual_px;
     vo.use_lines = o.lines;
     if (run.tweak) run.tweak(vo);
@@ -1085,6 +1087,10 @@ Runner AddPoseBench(CLI::App& sub) {
                  "sigma of a detection bias shared per class of known point (above / below the camera), px (issue 19, ninth session; 0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 10.0));
+  sub.add_option("--foot-variance-scale", o->foot_variance_scale,
+                 "a wall foot's match (known point below the camera) gets this many times a wall top's pixel variance (issue 19, tenth session; 1: same)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(1.0, 100.0));
   sub.add_option("--feature-shared-bias-px", o->feature_shared_bias_px,
                  "sigma of a detection bias every known point shares, px (issue 19, pose19e; 0: off)")
       ->capture_default_str()
