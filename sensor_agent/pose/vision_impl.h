@@ -114,6 +114,9 @@ struct VisionTracker::Impl {
     std::vector<Eigen::Vector2d> known_uv;  // between keyframes: the tracked known features, ideal pixels
     std::vector<cv::Point2f> frame_corners, corners;  // keyframes: detected corners (frame, ideal pixels)
     std::vector<Prediction> predicted;                // keyframes: the fine pass's predicted known points
+    // Keyframes the model fits nowhere as a whole: per known point and line, whether its own
+    // stretch of the outline lies nowhere either (VisionOptions::local_fit_px); empty: all fit.
+    std::vector<bool> point_unfit, line_unfit;
   };
 
   FeatureMap map;
@@ -223,7 +226,14 @@ struct VisionTracker::Impl {
   // Known points the filter's pose predicts visible, skyline corners first.
   std::vector<Prediction> PredictPoints(const PoseEkf& ekf);
   // Sampled frame pixels of the predicted model edges, and those on the skyline.
-  void EdgeSamples(const PoseEkf& ekf, std::vector<Eigen::Vector2d>& samples, std::vector<Eigen::Vector2d>& sky_samples);
+  void EdgeSamples(const PoseEkf& ekf, std::vector<Eigen::Vector2d>& samples, std::vector<Eigen::Vector2d>& sky_samples,
+                   std::vector<int>* sample_lines = nullptr, std::vector<int>* sky_lines = nullptr);
+  // The known points and lines whose own stretch of the outline fits on a frame that fits nowhere
+  // as a whole; true when enough do (AlignModelEdges, VisionOptions::local_fit_px).
+  bool LocalFit(Frame& f, const cv::Mat& edge_distance, std::vector<Eigen::Vector2d>& samples, std::vector<Eigen::Vector2d>& sky_samples,
+                const std::vector<int>& sample_lines, const std::vector<int>& sky_lines, const ImageAlignment& alignment) const;
+  // `predicted` without the points left out by LocalFit.
+  void DropUnfit(const Frame& f, std::vector<std::pair<int, Eigen::Vector2d>>& predicted) const;
   // The longest detected segment along the predicted image of a line feature.
   std::optional<Segment> MatchLine(const PoseEkf& ekf, const LineFeature& f, const std::vector<Segment>& segments) const;
   // A Fast Line Detector segment moved onto the sub-pixel intensity step along it.

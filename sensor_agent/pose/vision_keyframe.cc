@@ -101,7 +101,8 @@ std::vector<std::pair<int, Eigen::Vector2d>> VisionTracker::Impl::PredictPoints(
 
 // Sampled frame pixels of the predicted model edges, and those on the skyline (the model point
 // itself is seen and nothing is seen just above it), for the chamfer search.
-void VisionTracker::Impl::EdgeSamples(const PoseEkf& ekf, std::vector<Eigen::Vector2d>& samples, std::vector<Eigen::Vector2d>& sky_samples) {
+void VisionTracker::Impl::EdgeSamples(const PoseEkf& ekf, std::vector<Eigen::Vector2d>& samples, std::vector<Eigen::Vector2d>& sky_samples,
+                                      std::vector<int>* sample_lines, std::vector<int>* sky_lines) {
   const Eigen::Vector3d centre = ekf.world_from_camera().translation;
   RefreshCache(centre);
   for (size_t li = 0; li < map.lines.size(); ++li) {
@@ -117,12 +118,16 @@ void VisionTracker::Impl::EdgeSamples(const PoseEkf& ekf, std::vector<Eigen::Vec
       const Eigen::Vector2d p = ToFrame(*a + (*b - *a) * s);
       if (!InImage(k, p, 1)) continue;
       samples.push_back(p);
+      if (sample_lines) sample_lines->push_back(static_cast<int>(li));
       if (!horizontal) continue;
       if (sky[i] == 2) {
         const Eigen::Vector3d x = f.a + (f.b - f.a) * s;
         sky[i] = Visible(centre, x) && SkyAbove(centre, x);
       }
-      if (sky[i]) sky_samples.push_back(p);
+      if (sky[i]) {
+        sky_samples.push_back(p);
+        if (sky_lines) sky_lines->push_back(static_cast<int>(li));
+      }
     }
   }
 }
@@ -241,10 +246,17 @@ ImageAlignment VisionTracker::Impl::AlignModelEdges(PoseEkf& ekf, Frame& f, bool
   f.predicted = PredictPoints(ekf);
   f.stats.points_predicted = static_cast<int>(f.predicted.size());
   std::vector<Eigen::Vector2d> samples, sky_samples;
-  EdgeSamples(ekf, samples, sky_samples);
+  std::vector<int> sample_lines, sky_lines;
+  EdgeSamples(ekf, samples, sky_samples, &sample_lines, &sky_lines);
   f.timer.Lap(kStageVisibility);
-  const ImageAlignment alignment =
+  ImageAlignment alignment =
       ChamferAlign(edge_distance, samples, skyline_distance, sky_samples, options.search_radius_px, centre, turn ? roll_search : 0.0, roll_step);
+  // Where the outline fits nowhere as a whole but does around some features (a bus across half of
+  // the frame), only those are matched, and the alignment is searched again from their edges.
+  if (LocalFit(f, edge_distance, samples, sky_samples, sample_lines, sky_lines, alignment)) {
+    alignment = ChamferAlign(edge_distance, samples, skyline_distance, sky_samples, options.search_radius_px, centre, turn ? roll_search : 0.0, roll_step);
+  }
+  DropUnfit(f, f.predicted);
   // Nowhere does the model's outline lie on this frame's edges (a bus across half of it): the
   // frame's matches would be guesses, so none is applied, and the frame counts as a bad fit.
   // (A frame with too few model edges in view to score, +infinity, is not called unfit: its known
@@ -255,6 +267,77 @@ ImageAlignment VisionTracker::Impl::AlignModelEdges(PoseEkf& ekf, Frame& f, bool
   f.stats.coarse_rotation_rad = alignment.rotation_rad;
   f.timer.Lap(kStageChamfer);
   return alignment;
+}
+
+// On a keyframe the model's outline fits nowhere as a whole (max_alignment_score_px): each known
+// point and line judged by its own stretch of the outline placed by `alignment`, the mean truncated
+// edge distance of a line's samples, and of the samples within kLocal_px of a point's prediction
+// (local_fit_px). True when at least kMinFit of them fit: the others are left out of the frame's
+// matching (Frame::point_unfit, line_unfit) and `samples` / `sky_samples` keep the fitting lines'.
+bool VisionTracker::Impl::LocalFit(Frame& f, const cv::Mat& edge_distance, std::vector<Eigen::Vector2d>& samples,
+                                   std::vector<Eigen::Vector2d>& sky_samples, const std::vector<int>& sample_lines,
+                                   const std::vector<int>& sky_lines, const ImageAlignment& alignment) const {
+  f.point_unfit.clear();
+  f.line_unfit.clear();
+  const double limit = options.local_fit_px;
+  if (!(limit > 0) || !(options.max_alignment_score_px > 0) || !std::isfinite(alignment.score_px) ||
+      !(alignment.score_px > options.max_alignment_score_px)) {
+    return false;
+  }
+  constexpr double kLocal_px = 16;
+  constexpr int kMinSamples = 5, kMinFit = 4;
+  const Eigen::Vector2d centre(k.cx, k.cy);
+  std::vector<Eigen::Vector2d> placed(samples.size());
+  std::vector<float> distance(samples.size());
+  std::vector<double> line_sum(map.lines.size(), 0);
+  std::vector<int> line_count(map.lines.size(), 0);
+  for (size_t i = 0; i < samples.size(); ++i) {
+    placed[i] = alignment.Apply(samples[i], centre);
+    const int x = static_cast<int>(std::lround(placed[i].x())), y = static_cast<int>(std::lround(placed[i].y()));
+    const bool inside = x >= 0 && y >= 0 && x < edge_distance.cols && y < edge_distance.rows;
+    distance[i] = inside ? std::min(edge_distance.at<float>(y, x), static_cast<float>(kChamferCap_px)) : static_cast<float>(kChamferCap_px);
+    line_sum[sample_lines[i]] += distance[i];
+    ++line_count[sample_lines[i]];
+  }
+  int fit = 0;
+  f.line_unfit.assign(map.lines.size(), true);
+  for (size_t li = 0; li < map.lines.size(); ++li) {
+    f.line_unfit[li] = line_count[li] < kMinSamples || line_sum[li] / line_count[li] > limit;
+    fit += !f.line_unfit[li];
+  }
+  // Points not predicted on the coarse pass count as unfit: nothing says their outline is there.
+  f.point_unfit.assign(map.points.size(), true);
+  for (const auto& [index, uv] : f.predicted) {
+    const Eigen::Vector2d p = alignment.Apply(ToFrame(uv), centre);
+    double sum = 0;
+    int n = 0;
+    for (size_t i = 0; i < placed.size(); ++i) {
+      if ((placed[i] - p).squaredNorm() > kLocal_px * kLocal_px) continue;
+      sum += distance[i];
+      ++n;
+    }
+    f.point_unfit[index] = n < kMinSamples || sum / n > limit;
+    fit += !f.point_unfit[index];
+  }
+  if (fit < kMinFit) {
+    f.point_unfit.clear();
+    f.line_unfit.clear();
+    return false;
+  }
+  std::vector<Eigen::Vector2d> kept, kept_sky;
+  for (size_t i = 0; i < samples.size(); ++i)
+    if (!f.line_unfit[sample_lines[i]]) kept.push_back(samples[i]);
+  for (size_t i = 0; i < sky_samples.size(); ++i)
+    if (!f.line_unfit[sky_lines[i]]) kept_sky.push_back(sky_samples[i]);
+  samples.swap(kept);
+  sky_samples.swap(kept_sky);
+  f.stats.local_fit = true;
+  return true;
+}
+
+void VisionTracker::Impl::DropUnfit(const Frame& f, std::vector<std::pair<int, Eigen::Vector2d>>& predicted) const {
+  if (f.point_unfit.empty()) return;
+  std::erase_if(predicted, [&](const auto& p) { return f.point_unfit[p.first]; });
 }
 
 // The coarse pass proper: the predicted points moved by the alignment and matched within
@@ -273,7 +356,9 @@ PoseEkf VisionTracker::Impl::CoarsePass(const PoseEkf& ekf, Frame& f, const Imag
   // radius, applied to a fresh copy of the filter), as the pose that the first matches pulled
   // brings more of the image's corners within reach (iterated re-linearisation).
   for (int pass = 1; turn && pass < options.acquisition_coarse_passes; ++pass) {
-    const std::vector<std::pair<int, int>> again = MatchPoints(PredictPoints(coarse), f.corners, Eigen::Vector2d::Zero(), kCoarseMatch_px);
+    std::vector<std::pair<int, Eigen::Vector2d>> predicted = PredictPoints(coarse);
+    DropUnfit(f, predicted);
+    const std::vector<std::pair<int, int>> again = MatchPoints(predicted, f.corners, Eigen::Vector2d::Zero(), kCoarseMatch_px);
     coarse = ekf;
     for (const auto& [index, j] : again) (void)coarse.UpdatePoint(k, map.points[index], Eigen::Vector2d(f.corners[j].x, f.corners[j].y));
   }
@@ -286,10 +371,14 @@ PoseEkf VisionTracker::Impl::CoarsePass(const PoseEkf& ekf, Frame& f, const Imag
 // and matched within match_radius_px.
 void VisionTracker::Impl::FinePass(PoseEkf& ekf, Frame& f, const PoseEkf& coarse, const std::vector<Segment>& segments) {
   f.predicted = PredictPoints(coarse);
+  DropUnfit(f, f.predicted);
   std::vector<bool> seen_lines(map.lines.size(), false);
   if (options.use_lines) {
     const Eigen::Vector3d centre = coarse.world_from_camera().translation;
-    for (size_t i = 0; i < map.lines.size(); ++i) seen_lines[i] = LineSeen(static_cast<int>(i), centre);
+    for (size_t i = 0; i < map.lines.size(); ++i) {
+      seen_lines[i] = LineSeen(static_cast<int>(i), centre);
+      if (!f.line_unfit.empty() && f.line_unfit[i]) seen_lines[i] = false;
+    }
   }
   f.timer.Lap(kStageVisibility);
   const std::vector<std::pair<int, int>> matches = MatchPoints(f.predicted, f.corners, Eigen::Vector2d::Zero(), options.match_radius_px);

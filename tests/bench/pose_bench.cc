@@ -97,6 +97,7 @@ struct PoseBenchOptions {
   double feature_shared_bias_px = pose::VisionOptions{}.feature_shared_bias_px;
   double feature_class_bias_px = pose::VisionOptions{}.feature_class_bias_px;  // issue 19, ninth session
   double foot_variance_scale = pose::VisionOptions{}.foot_variance_scale;      // issue 19, tenth session
+  double local_fit_px = pose::VisionOptions{}.local_fit_px;                    // issue 19, tenth session
   double robust_residual_px = pose::VisionOptions{}.robust_residual_px;
   double gyro_bias_sigma_rad_s = pose::PoseFilterOptions{}.gyro_bias_sigma_rad_s;
   bool knobs = true;     // the front end's knobs at 50 features
@@ -550,6 +551,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.feature_shared_bias_px = o.feature_shared_bias_px;
     vo.feature_class_bias_px = o.feature_class_bias_px;
     vo.foot_variance_scale = o.foot_variance_scale;
+    vo.local_fit_px = o.local_fit_px;
     vo.robust_residual_px = o.robust_residual_px;
     vo.use_lines = o.lines;
     if (run.tweak) run.tweak(vo);
@@ -1087,6 +1089,10 @@ Runner AddPoseBench(CLI::App& sub) {
                  "sigma of a detection bias shared per class of known point (above / below the camera), px (issue 19, ninth session; 0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 10.0));
+  sub.add_option("--local-fit-px", o->local_fit_px,
+                 "on a keyframe that fits nowhere as a whole, features whose own outline lies within this mean edge distance are still matched (0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 8.0));
   sub.add_option("--foot-variance-scale", o->foot_variance_scale,
                  "a wall foot's match (known point below the camera) gets this many times a wall top's pixel variance (issue 19, tenth session; 1: same)")
       ->capture_default_str()
