@@ -118,11 +118,6 @@ ImageAlignment ChamferAlign(const cv::Mat& edge_distance, const std::vector<Eige
   return best_turn.score_px < best.score_px - kTurnMargin_px ? best_turn : best;
 }
 
-double ChamferScore(const cv::Mat& edge_distance, const std::vector<Eigen::Vector2d>& samples, const cv::Mat& skyline_distance,
-                    const std::vector<Eigen::Vector2d>& sky_samples) {
-  return MeanDistance(edge_distance, samples, 0, 0) + (sky_samples.size() >= 5 ? MeanDistance(skyline_distance, sky_samples, 0, 0) : 0.0);
-}
-
 void EdgeDistances(const cv::Mat& gray, cv::Mat& edge_distance, cv::Mat& skyline_distance) {
   cv::Mat edges;
   cv::Canny(gray, edges, 60, 180);

@@ -61,11 +61,6 @@ ImageAlignment ChamferAlign(const cv::Mat& edge_distance, const std::vector<Eige
                             const std::vector<Eigen::Vector2d>& sky_samples, double radius, const Eigen::Vector2d& centre,
                             double max_rotation_rad, double rotation_step_rad, int coarse_step = 2);
 
-// The chamfer score of model-edge samples already placed in the frame: their mean edge distance
-// (truncated at kChamferCap_px) plus, with 5 or more sky samples, the skyline's.
-double ChamferScore(const cv::Mat& edge_distance, const std::vector<Eigen::Vector2d>& samples, const cv::Mat& skyline_distance,
-                    const std::vector<Eigen::Vector2d>& sky_samples);
-
 // Distance transforms of the Canny edges and of the skyline (in each column, the first edge pixel
 // from the top) of a grey frame.
 void EdgeDistances(const cv::Mat& gray, cv::Mat& edge_distance, cv::Mat& skyline_distance);
