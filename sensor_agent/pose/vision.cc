@@ -53,7 +53,8 @@ std::string VisionOptions::Check() const {
   if (!(robust_residual_px >= 0 && std::isfinite(robust_residual_px))) return "robust_residual_px must be finite and >= 0";
   if (!(feature_class_bias_px >= 0 && std::isfinite(feature_class_bias_px))) return "feature_class_bias_px must be finite and >= 0";
   if (!(foot_variance_scale >= 1 && std::isfinite(foot_variance_scale))) return "foot_variance_scale must be finite and >= 1";
-  if (!(local_fit_px >= 0 && std::isfinite(local_fit_px))) return "local_fit_px must be finite and >= 0";
+  if (!(local_fit_px >= 0 && std::isfinite(local_fit_px)) || !(local_fit_after_lock_s >= 0 && std::isfinite(local_fit_after_lock_s)))
+    return "local_fit_px and local_fit_after_lock_s must be finite and >= 0";
   if (!(tracked_max_innovation_px >= 0)) return "tracked_max_innovation_px must be >= 0";
   if (!(landmark_sigma_px >= 0)) return "landmark_sigma_px must be >= 0";
   if (!(landmark_bias_px >= 0 && std::isfinite(landmark_bias_px))) return "landmark_bias_px must be finite and >= 0";

@@ -178,8 +178,11 @@ struct VisionOptions {
   // scores 8-9 px over the whole frame and the pose drifted to 11 px median while nothing was
   // applied; at 2 px: 1.58 px median, p95 2.70 during it, 0.56 after; at 3 px 1.28 / 2.03 / 0.54,
   // but a single half-covered frame then moved a locked pose 0.55 -> 1.18 px, a line along the
-  // covering edge taken). 0: the whole frame only.
+  // covering edge taken). 0: the whole frame only. Only once the lock has held
+  // local_fit_after_lock_s: a lock formed metres off fits nowhere soon after and must be declared
+  // lost, not held by the few features that still fit by chance.
   double local_fit_px = 2;
+  double local_fit_after_lock_s = 2;
   // Coarse passes (match, update a copy) while acquiring: 1 = one, as on locked keyframes; more
   // re-match from the pose the last pass pulled (tried, not better: docs/POSE.md).
   int acquisition_coarse_passes = 1;

@@ -133,6 +133,7 @@ struct VisionTracker::Impl {
   bool acquired = false;       // the first vision frame has widened the GPS + AHRS prior (acquisition_*)
   bool relocalize = true;      // the next keyframe searches positions around the filter's (first frame, lost)
   bool locked_once = false;    // the lock has held since the start or since the pose was last declared lost
+  int64_t lock_since_ns = 0;   // filter time the lock formed (locked_once)
   int good_full_matches = 0;  // consecutive full matchings that fitted well (lock_frames)
   int bad_full_matches = 0;   // ... and badly (lost_frames)
   int64_t next_track_id = 1;

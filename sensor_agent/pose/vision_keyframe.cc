@@ -252,8 +252,12 @@ ImageAlignment VisionTracker::Impl::AlignModelEdges(PoseEkf& ekf, Frame& f, bool
   ImageAlignment alignment =
       ChamferAlign(edge_distance, samples, skyline_distance, sky_samples, options.search_radius_px, centre, turn ? roll_search : 0.0, roll_step);
   // Where the outline fits nowhere as a whole but does around some features (a bus across half of
-  // the frame), only those are matched, and the alignment is searched again from their edges.
-  if (LocalFit(f, edge_distance, samples, sky_samples, sample_lines, sky_lines, alignment)) {
+  // the frame), only those are matched, and the alignment is searched again from their edges. Only
+  // once the lock has held local_fit_after_lock_s: a lock formed 2 m off on the first frames fits
+  // nowhere a second later, and must then be declared lost, not held by the features that still fit
+  // by chance (13 draws: one ended 11 px off).
+  const bool mature = locked_once && static_cast<double>(ekf.time_ns() - lock_since_ns) * 1e-9 >= options.local_fit_after_lock_s;
+  if (mature && LocalFit(f, edge_distance, samples, sky_samples, sample_lines, sky_lines, alignment)) {
     alignment = ChamferAlign(edge_distance, samples, skyline_distance, sky_samples, options.search_radius_px, centre, turn ? roll_search : 0.0, roll_step);
   }
   DropUnfit(f, f.predicted);
@@ -477,6 +481,7 @@ void VisionTracker::Impl::UpdateLock(PoseEkf& ekf, Frame& f, const ImageAlignmen
   const bool good = applied >= options.min_tracked_known && f.stats.rejected <= options.weak_lock_gated_share * tried && aligned;
   good_full_matches = good ? good_full_matches + 1 : 0;
   bad_full_matches = good ? 0 : bad_full_matches + 1;
+  if (!locked_once && good_full_matches >= options.lock_frames) lock_since_ns = ekf.time_ns();
   locked_once = locked_once || good_full_matches >= options.lock_frames;
   if (options.lost_frames > 0 && bad_full_matches >= options.lost_frames) {
     ekf.InflatePose(0.5, options.lost_orientation_sigma_deg * 3.14159265358979323846 / 180);

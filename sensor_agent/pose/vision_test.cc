@@ -288,38 +288,48 @@ TEST_F(VisionTest, AFrameTheModelFitsNowhereAppliesNothing) {
 }
 
 // Issue 19, tenth session: a frame whose left half a near object covers fits nowhere as a whole,
-// but its right half does: with local_fit_px the right half's features still correct the pose, and
-// none is taken from the covered half; judged as a whole (local_fit_px 0) it applies nothing.
-TEST_F(VisionTest, AHalfCoveredFrameUsesTheCellsWhereTheModelFits) {
+// but its right half does. Once the lock has held (local_fit_after_lock_s), the right half's
+// features still correct the pose and none is taken from the covered half; judged as a whole
+// (local_fit_px 0), or with a lock just formed, the frame applies nothing.
+TEST_F(VisionTest, AHalfCoveredFrameUsesTheFeaturesWhoseOutlineFits) {
   const scene::CameraSpec& camera = *scenario_->world.FindCamera("backpack");
   const sim::SimulatedCamera sim_camera(scenario_->world, camera, scenario_->EffectsForCamera("backpack"), scenario_->seed);
-  sim::SimImage frame = sim_camera.Frame(120, 4.0);
+  const sim::SimImage clear = sim_camera.Frame(120, 4.0);
+  sim::SimImage covered = clear;
   const Rigid3d truth = sim_camera.PoseAt(4.0);
-  cv::Mat image(frame.height, frame.width, CV_8UC3, frame.bgr.data());
-  image(cv::Rect(0, 0, frame.width / 2, frame.height)).setTo(cv::Scalar(40, 90, 200));  // a bus side, no edges
-  // A filter that holds the lock: a few centimetres and a tenth of a degree off, and sure of it.
+  cv::Mat image(covered.height, covered.width, CV_8UC3, covered.bgr.data());
+  image(cv::Rect(0, 0, covered.width / 2, covered.height)).setTo(cv::Scalar(40, 90, 200));  // a bus side, no edges
   const Rigid3d start(SO3Exp(Eigen::Vector3d(0.05 * kDeg, -0.1 * kDeg, 0.05 * kDeg)) * truth.rotation, truth.translation + Eigen::Vector3d(0.05, -0.05, 0.02));
   const std::vector<Eigen::Vector3d> visible = VisionTracker(CampusFeatureMap(scenario_->world), scene::BuildStaticMesh(scenario_->world, 2.0),
                                                              camera.intrinsics).VisiblePoints(truth);
-  for (double local : {0.0, 2.0}) {
-    SCOPED_TRACE(local);
+  struct Case {
+    double local_fit_px, after_lock_s;
+    bool applies;
+  };
+  for (const Case& c : {Case{0.0, 0.0, false}, Case{2.0, 2.0, false}, Case{2.0, 0.0, true}}) {
+    SCOPED_TRACE(testing::Message() << c.local_fit_px << " px, " << c.after_lock_s << " s");
     VisionOptions options;
-    options.local_fit_px = local;
+    options.local_fit_px = c.local_fit_px;
+    options.local_fit_after_lock_s = c.after_lock_s;
     VisionTracker vision(CampusFeatureMap(scenario_->world), scene::BuildStaticMesh(scenario_->world, 2.0), camera.intrinsics, options);
     PoseEkf ekf;
     ekf.Initialize(0, start, 0.1, 0.2 * kDeg);
-    const VisionFrameStats stats = vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
-    if (local == 0) {
+    for (int i = 0; i <= options.lock_frames; ++i) (void)vision.Update(clear.bgr.data(), clear.width, clear.height, ekf);  // the lock forms
+    const Rigid3d locked = ekf.world_from_camera();
+    const VisionFrameStats stats = vision.Update(covered.bgr.data(), covered.width, covered.height, ekf);
+    if (!c.applies) {
       EXPECT_TRUE(stats.unfit);
+      EXPECT_FALSE(stats.local_fit);
       EXPECT_EQ(stats.features_used(), 0);
+      EXPECT_TRUE(ekf.world_from_camera().translation.isApprox(locked.translation));
       continue;
     }
     EXPECT_FALSE(stats.unfit);
     EXPECT_TRUE(stats.local_fit);
     EXPECT_GE(stats.points_used + stats.lines_used, 4);
-    for (const auto& [point, uv] : stats.point_matches) EXPECT_GE(uv.x(), frame.width / 2 - 10) << "a match in the covered half";
+    for (const auto& [point, uv] : stats.point_matches) EXPECT_GE(uv.x(), covered.width / 2 - 10) << "a match in the covered half";
     EXPECT_LT(MedianMisregistration(camera.intrinsics, truth, ekf.world_from_camera(), visible), 1.0)
-        << "from " << MedianMisregistration(camera.intrinsics, truth, start, visible) << " px";
+        << "from " << MedianMisregistration(camera.intrinsics, truth, locked, visible) << " px";
   }
 }
 
@@ -618,6 +628,9 @@ TEST(VisionOptions, CheckNamesTheBadField) {
   o = VisionOptions();
   o.local_fit_px = -1;
   EXPECT_THAT(o.Check(), ::testing::HasSubstr("local_fit_px"));
+  o = VisionOptions();
+  o.local_fit_after_lock_s = std::nan("");
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("local_fit_after_lock_s"));
 }
 
 }  // namespace
