@@ -201,6 +201,13 @@ struct VisionOptions {
   // 2.6 m the wrong way: at 0.3 it stays (p95 13.9 -> 2.6 px) and no other draw changes; at 0.5 draw 8's
   // needed move is refused (p95 5.3 px), at 1.0 draw 5's too (lost). A thin margin: 0: off.
   double relocalize_distinct_px = 0.3;
+  // ... and a relocalisation is believed only where the model's outline fits the frame well: the
+  // best chamfer score over the grid (the filter's own position included) at most this (issue 19,
+  // eleventh session). Over 13 draws the right first relocalisations scored 2.5-3.2 px; the two
+  // wrong ones (a tree over the façades' tops, 3 m off) 4.6 and 5.2. A frame that fits nowhere this
+  // well applies nothing, counts neither towards the lock nor the loss, and the search runs again
+  // on the next frame (VisionFrameStats::relocalize_waiting). 0: off.
+  double relocalize_max_score_px = 4;
   // Persisting detection bias of the known features (issue 19, docs/POSE.md "NEES by cause"): a
   // rendered or real building corner is found 0.2-0.4 px off its model point the same way at every
   // keyframe and along every track, so no number of sightings averages it away, and the
@@ -360,6 +367,7 @@ struct VisionFrameStats {
   bool weak_lock = false;    // ... because the tracked known features disagreed with the prediction
   int relocks = 0;           // the pose was declared lost (lost_frames) and its covariance inflated
   bool relocalized = false;  // the position search moved the filter (relocalize_extent_m)
+  bool relocalize_waiting = false;  // ... found no position the model fits well (relocalize_max_score_px): nothing applied
   bool unfit = false;        // a keyframe whose chamfer alignment fitted too badly to apply anything (max_alignment_score_px)
   bool local_fit = false;    // a keyframe that fitted nowhere as a whole, matched only where its features' outline fits (local_fit_px)
   int known_tracked = 0;     // known features followed by KLT into this frame

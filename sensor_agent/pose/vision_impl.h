@@ -220,10 +220,12 @@ struct VisionTracker::Impl {
 
   // --- Model matching (vision_keyframe.cc) ---
 
-  // Relocalisation: moves the filter to the best chamfer fit on a grid of positions around its own.
   void ConstrainHeight(PoseEkf& ekf, Frame& f);
   bool ApplyCarrierHeight(PoseEkf& ekf);  // true when applied
-  bool Relocalize(PoseEkf& ekf, const cv::Mat& edge_distance, const cv::Mat& skyline_distance, double roll_search, double roll_step);
+  // Relocalisation: moves the filter to the best chamfer fit on a grid of positions around its own;
+  // kWaiting when the model fits well nowhere on the grid (relocalize_max_score_px).
+  enum class Relocation { kStayed, kMoved, kWaiting };
+  Relocation Relocalize(PoseEkf& ekf, const cv::Mat& edge_distance, const cv::Mat& skyline_distance, double roll_search, double roll_step);
   // Known points the filter's pose predicts visible, skyline corners first.
   std::vector<Prediction> PredictPoints(const PoseEkf& ekf);
   // Sampled frame pixels of the predicted model edges, and those on the skyline.

@@ -24,8 +24,9 @@ constexpr double kDegToRad = 3.14159265358979323846 / 180;
 
 // Relocalisation (VisionOptions::relocalize_extent_m): the chamfer alignment (shift and turn) of
 // the model's edges from positions on a horizontal grid around the filter's; the filter moves to
-// the best one when it fits clearly better than where it is. True when it moved.
-bool VisionTracker::Impl::Relocalize(PoseEkf& ekf, const cv::Mat& edge_distance, const cv::Mat& skyline_distance, double roll_search,
+// the best one when it fits clearly better than where it is. kWaiting (nothing moved) when even the
+// best fit is poor: a wrong position can then score best by chance (a tree over the façades' tops).
+VisionTracker::Impl::Relocation VisionTracker::Impl::Relocalize(PoseEkf& ekf, const cv::Mat& edge_distance, const cv::Mat& skyline_distance, double roll_search,
                                      double roll_step) {
   const Eigen::Vector2d centre(k.cx, k.cy);
   const Eigen::Vector3d here = ekf.world_from_camera().translation;
@@ -68,19 +69,21 @@ bool VisionTracker::Impl::Relocalize(PoseEkf& ekf, const cv::Mat& edge_distance,
       }
     }
   }
-  if (!(best < at_here - options.relocalize_margin_px) || (options.max_alignment_score_px > 0 && best > options.max_alignment_score_px)) return false;
+  if (options.relocalize_max_score_px > 0 && !(best <= options.relocalize_max_score_px)) return Relocation::kWaiting;
+  if (!(best < at_here - options.relocalize_margin_px) || (options.max_alignment_score_px > 0 && best > options.max_alignment_score_px))
+    return Relocation::kStayed;
   if (options.relocalize_distinct_px > 0) {
     double elsewhere = std::numeric_limits<double>::infinity();
     for (const auto& [position, score] : grid)
       if ((position - best_position).norm() > 1.5 * options.relocalize_step_m) elsewhere = std::min(elsewhere, score);
-    if (!(best < elsewhere - options.relocalize_distinct_px)) return false;
+    if (!(best < elsewhere - options.relocalize_distinct_px)) return Relocation::kStayed;
   }
   ekf.MovePosition(best_position, step);
   // The move forgot what the filter knew of its position, the carried camera's height included
   // (draw 5 of 13: 1.2 m low again, taken as a 1 deg pitch): that measurement again, at full weight.
   last_height_ns = INT64_MIN;
   (void)ApplyCarrierHeight(ekf);
-  return true;
+  return Relocation::kMoved;
 }
 
 // Known points the filter's pose predicts visible: (map index, predicted pixel).
@@ -239,8 +242,10 @@ ImageAlignment VisionTracker::Impl::AlignModelEdges(PoseEkf& ekf, Frame& f, bool
   const Eigen::Vector2d centre(k.cx, k.cy);
   const double roll_search = options.acquisition_roll_search_deg * kDegToRad, roll_step = options.acquisition_roll_step_deg * kDegToRad;
   if (relocalize && options.relocalize_extent_m > 0) {
-    relocalize = false;
-    f.stats.relocalized = Relocalize(ekf, edge_distance, skyline_distance, roll_search, roll_step);
+    const Relocation r = Relocalize(ekf, edge_distance, skyline_distance, roll_search, roll_step);
+    f.stats.relocalized = r == Relocation::kMoved;
+    f.stats.relocalize_waiting = r == Relocation::kWaiting;
+    relocalize = f.stats.relocalize_waiting;  // searched again on the next frame
     f.timer.Lap(kStageChamfer);
   }
   f.predicted = PredictPoints(ekf);
@@ -266,7 +271,7 @@ ImageAlignment VisionTracker::Impl::AlignModelEdges(PoseEkf& ekf, Frame& f, bool
   // (A frame with too few model edges in view to score, +infinity, is not called unfit: its known
   // corners still go through the gate.)
   f.stats.unfit = options.max_alignment_score_px > 0 && std::isfinite(alignment.score_px) && alignment.score_px > options.max_alignment_score_px;
-  if (f.stats.unfit) f.budget = 0;
+  if (f.stats.unfit || f.stats.relocalize_waiting) f.budget = 0;
   f.stats.coarse_offset_px = alignment.offset;
   f.stats.coarse_rotation_rad = alignment.rotation_rad;
   f.timer.Lap(kStageChamfer);
@@ -469,6 +474,9 @@ void VisionTracker::Impl::ApplyFineMatches(PoseEkf& ekf, Frame& f, const std::ve
 // lost_frames bad ones in a row the pose is declared lost, its covariance widened and the next
 // keyframe relocalises.
 void VisionTracker::Impl::UpdateLock(PoseEkf& ekf, Frame& f, const ImageAlignment& alignment, bool acquiring) {
+  // A frame still waiting for a position the model fits (relocalize_max_score_px) applied nothing
+  // and says nothing of the lock: counting it as lost would inflate the pose every lost_frames.
+  if (f.stats.relocalize_waiting) return;
   // The lock: enough features applied and few rejected; tracking resumes after lock_frames of these.
   const int applied = f.stats.points_used + f.stats.lines_used, tried = applied + f.stats.rejected;
   // ... and the model's edges lay down on the frame's where the filter predicts them: a coarse

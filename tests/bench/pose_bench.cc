@@ -76,6 +76,7 @@ struct PoseBenchOptions {
   double relocalize_extent_m = pose::VisionOptions{}.relocalize_extent_m;
   double relocalize_step_m = pose::VisionOptions{}.relocalize_step_m;
   double relocalize_distinct_px = pose::VisionOptions{}.relocalize_distinct_px;
+  double relocalize_max_score_px = pose::VisionOptions{}.relocalize_max_score_px;  // issue 19, eleventh session
   double gyro_correlation_s = pose::PoseFilterOptions{}.gyro_correlation_s;  // issue 19
   double acquiring_sigma_px = pose::VisionOptions{}.acquiring_sigma_px;  // issue 19
   double gyro_sigma_rad_s = pose::PoseFilterOptions{}.gyro_sigma_rad_s;
@@ -153,7 +154,7 @@ struct Row {
   std::map<std::tuple<double, double, double>, PointResiduals> point_residuals;
   int matches_beyond_3px = 0;
   std::array<double, pose::kVisionStageCount> stage_ms{};
-  int keyframes = 0, weak_locks = 0, relocks = 0, unfit = 0, relocalized = 0;
+  int keyframes = 0, weak_locks = 0, relocks = 0, unfit = 0, relocalized = 0, relocalize_waiting = 0;
   int64_t rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0, klt_lost = 0, unknown_dropped = 0, rejected_tracked_jump = 0;
   int nees_frames = 0, nees_in_band = 0, nees_below = 0, nees_above = 0;
   // Unknown features joining the state (joint mode), against the static mesh's point on the true
@@ -536,6 +537,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.relocalize_extent_m = o.relocalize_extent_m;
     vo.relocalize_step_m = o.relocalize_step_m;
     vo.relocalize_distinct_px = o.relocalize_distinct_px;
+    vo.relocalize_max_score_px = o.relocalize_max_score_px;
     vo.acquisition_roll_search_deg = o.roll_search_deg;
     vo.acquisition_orientation_sigma_deg = o.acquisition_sigma_deg;
     vo.feature_bias_px = o.feature_bias_px;
@@ -590,6 +592,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
         row.weak_locks += s.weak_lock;
         row.unfit += s.unfit;
         row.relocalized += s.relocalized;
+        row.relocalize_waiting += s.relocalize_waiting;
         row.relocks += s.relocks;
         row.rejected_tracked_jump += s.rejected_tracked_jump;
         row.rejected_gate += s.rejected_gate, row.rejected_behind += s.rejected_behind, row.rejected_not_finite += s.rejected_not_finite;
@@ -789,14 +792,14 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     for (const Row* r : staged) std::printf(" **%.2f** |", r->TotalMs());
     std::printf("\n");
   }
-  std::printf("\nrejections over the run (features not applied, by reason):\n| mode | outside the gate | tracked, off the prediction | behind the camera | not finite | KLT lost | unknown features dropped (gate) | weak-lock keyframes | declared lost | keyframes the model fits nowhere | relocalised |\n");
-  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+  std::printf("\nrejections over the run (features not applied, by reason):\n| mode | outside the gate | tracked, off the prediction | behind the camera | not finite | KLT lost | unknown features dropped (gate) | weak-lock keyframes | declared lost | keyframes the model fits nowhere | relocalised | waiting for a fit |\n");
+  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
   for (const Row& r : rows) {
     if (r.features == 0 || r.mode != "gps-imu-vision") continue;
-    std::printf("| %s | %lld | %lld | %lld | %lld | %lld | %lld | %d | %d | %d | %d |\n", RowName(r).c_str(), static_cast<long long>(r.rejected_gate),
+    std::printf("| %s | %lld | %lld | %lld | %lld | %lld | %lld | %d | %d | %d | %d | %d |\n", RowName(r).c_str(), static_cast<long long>(r.rejected_gate),
                 static_cast<long long>(r.rejected_tracked_jump),
                 static_cast<long long>(r.rejected_behind), static_cast<long long>(r.rejected_not_finite), static_cast<long long>(r.klt_lost),
-                static_cast<long long>(r.unknown_dropped), r.weak_locks, r.relocks, r.unfit, r.relocalized);
+                static_cast<long long>(r.unknown_dropped), r.weak_locks, r.relocks, r.unfit, r.relocalized, r.relocalize_waiting);
   }
   std::printf("\nNEES of the pose per frame against the chi2(6) 95 %% band [%.2f, %.2f] (below: the covariance is too large; above: too small),"
               " and unknown features joining the state vs the static mesh's point on the true ray:\n"
@@ -1137,6 +1140,10 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--relocalize-distinct", o->relocalize_distinct_px,
                  "relocalisation moves only when its best fit beats every fit farther than 1.5 steps by this, px (0: off)")
       ->capture_default_str();
+  sub.add_option("--relocalize-max-score", o->relocalize_max_score_px,
+                 "relocalisation is believed only where the best chamfer score is at most this, px; else nothing is applied and it searches again next frame (0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 100.0));
   sub.add_option("--carrier-height", o->carrier_height_m,
                  "the carried camera's height above the ground in m, applied every frame (VisionOptions::carrier_height_m; -1: the camera path's, 0: off)")
       ->capture_default_str();
