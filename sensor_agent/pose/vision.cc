@@ -46,6 +46,7 @@ std::string VisionOptions::Check() const {
     return "relocalize_extent_m must be in [0, 20 relocalize_step_m], relocalize_step_m > 0 and relocalize_margin_px >= 0";
   if (!(relocalize_distinct_px >= 0)) return "relocalize_distinct_px must be >= 0";
   if (!(relocalize_max_score_px >= 0)) return "relocalize_max_score_px must be >= 0";
+  if (relocalize_retry_frames < 1) return "relocalize_retry_frames must be >= 1";
   if (lost_frames < 0 || !(lost_orientation_sigma_deg >= 0)) return "lost_frames and lost_orientation_sigma_deg must be >= 0";
   if (!(carrier_height_m >= 0) || !(carrier_height_sigma_m > 0) || !(carrier_height_correlation_s >= 0))
     return "carrier_height_m and carrier_height_correlation_s must be >= 0 and carrier_height_sigma_m > 0";

@@ -208,6 +208,9 @@ struct VisionOptions {
   // well applies nothing, counts neither towards the lock nor the loss, and the search runs again
   // on the next frame (VisionFrameStats::relocalize_waiting). 0: off.
   double relocalize_max_score_px = 4;
+  // ... and while it waits, the search (~250 ms on one core) runs again on every this many frames;
+  // the frames between apply nothing and cost what a tracked frame costs. 1: every frame.
+  int relocalize_retry_frames = 5;
   // Persisting detection bias of the known features (issue 19, docs/POSE.md "NEES by cause"): a
   // rendered or real building corner is found 0.2-0.4 px off its model point the same way at every
   // keyframe and along every track, so no number of sightings averages it away, and the

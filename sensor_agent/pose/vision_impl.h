@@ -132,6 +132,7 @@ struct VisionTracker::Impl {
   int frames_since_keyframe = 0;
   bool acquired = false;       // the first vision frame has widened the GPS + AHRS prior (acquisition_*)
   bool relocalize = true;      // the next keyframe searches positions around the filter's (first frame, lost)
+  int relocalize_wait = 0;     // frames before a waiting relocalisation searches again (relocalize_retry_frames)
   bool locked_once = false;    // the lock has held since the start or since the pose was last declared lost
   int64_t lock_since_ns = 0;   // filter time the lock formed (locked_once)
   int good_full_matches = 0;  // consecutive full matchings that fitted well (lock_frames)

@@ -179,6 +179,14 @@ Segment VisionTracker::Impl::RefineSegment(const cv::Mat& gray, const Segment& s
 // matched to the model's points and lines; the corners also seed new unknown tracks (step 4).
 void VisionTracker::Impl::UpdateKeyframe(PoseEkf& ekf, Frame& f) {
   frames_since_keyframe = 0;
+  // A relocalisation waiting for a frame the model fits well searches only every
+  // relocalize_retry_frames: the frames between apply nothing (and skip the keyframe's detection).
+  if (relocalize && relocalize_wait > 0) {
+    --relocalize_wait;
+    f.stats.relocalize_waiting = true;
+    f.budget = 0;
+    return;
+  }
   DetectCorners(f);
   const std::vector<Segment> segments = DetectSegments(f);
   // While acquiring (before the first lock, and after the pose was declared lost) the search turns
@@ -245,7 +253,8 @@ ImageAlignment VisionTracker::Impl::AlignModelEdges(PoseEkf& ekf, Frame& f, bool
     const Relocation r = Relocalize(ekf, edge_distance, skyline_distance, roll_search, roll_step);
     f.stats.relocalized = r == Relocation::kMoved;
     f.stats.relocalize_waiting = r == Relocation::kWaiting;
-    relocalize = f.stats.relocalize_waiting;  // searched again on the next frame
+    relocalize = f.stats.relocalize_waiting;  // searched again relocalize_retry_frames later
+    relocalize_wait = f.stats.relocalize_waiting ? options.relocalize_retry_frames - 1 : 0;
     f.timer.Lap(kStageChamfer);
   }
   f.predicted = PredictPoints(ekf);

@@ -247,34 +247,46 @@ TEST_F(VisionTest, RelocalisationWaitsForAFrameTheModelFitsWell) {
   cv::flip(image.clone(), image, -1);
   const Rigid3d truth = sim_camera.PoseAt(4.0);
   const Rigid3d start(SO3Exp(Eigen::Vector3d(0.2 * kDeg, 0.3 * kDeg, -0.2 * kDeg)) * truth.rotation, truth.translation + Eigen::Vector3d(2.3, -1.6, 0));
-  auto run = [&](double max_score_px) {
+  // The flipped frame first, then the true frame `more` times; each frame's stats, and how far the
+  // first moved the filter and the last left it from the truth.
+  auto run = [&](double max_score_px, int retry_frames, int more) {
     VisionOptions options;
     options.relocalize_max_score_px = max_score_px;
+    options.relocalize_retry_frames = retry_frames;
     VisionTracker vision(CampusFeatureMap(scenario_->world), scene::BuildStaticMesh(scenario_->world, 2.0), camera.intrinsics, options);
     PoseEkf ekf;
     ekf.Initialize(0, start, 0.3, 1 * kDeg);
-    const VisionFrameStats first = vision.Update(flipped.bgr.data(), flipped.width, flipped.height, ekf);
-    const Eigen::Vector3d after_first = ekf.world_from_camera().translation;
-    const VisionFrameStats second = vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
+    std::vector<VisionFrameStats> stats = {vision.Update(flipped.bgr.data(), flipped.width, flipped.height, ekf)};
+    const double first_move_m = (ekf.world_from_camera().translation - start.translation).norm();
+    for (int i = 0; i < more; ++i) stats.push_back(vision.Update(frame.bgr.data(), frame.width, frame.height, ekf));
     EXPECT_TRUE(ekf.covariance().allFinite());
-    return std::make_tuple(first, second, (after_first - start.translation).norm(),
-                           (ekf.world_from_camera().translation - truth.translation).head<2>().norm());
+    return std::make_tuple(stats, first_move_m, (ekf.world_from_camera().translation - truth.translation).head<2>().norm());
   };
-  const auto [first, second, first_move_m, error_m] = run(VisionOptions().relocalize_max_score_px);
-  EXPECT_TRUE(first.relocalize_waiting);
-  EXPECT_FALSE(first.relocalized);
-  EXPECT_EQ(first.features_used(), 0);
-  EXPECT_EQ(first.relocks, 0);
+  const auto [stats, first_move_m, error_m] = run(VisionOptions().relocalize_max_score_px, 1, 1);
+  EXPECT_TRUE(stats[0].relocalize_waiting);
+  EXPECT_FALSE(stats[0].relocalized);
+  EXPECT_EQ(stats[0].features_used(), 0);
+  EXPECT_EQ(stats[0].relocks, 0);
   EXPECT_LT(first_move_m, 0.1) << "nothing applied while waiting";
-  EXPECT_FALSE(second.relocalize_waiting);
-  EXPECT_TRUE(second.relocalized);
+  EXPECT_FALSE(stats[1].relocalize_waiting);
+  EXPECT_TRUE(stats[1].relocalized);
   EXPECT_LT(error_m, 0.8);
   // Without the rule the first frame's search is spent on the frame that fits nowhere, and the
   // second starts from the GPS position.
-  const auto [first_off, second_off, first_move_off_m, error_off_m] = run(0);
-  EXPECT_FALSE(first_off.relocalize_waiting);
-  EXPECT_FALSE(second_off.relocalized);
+  const auto [stats_off, first_move_off_m, error_off_m] = run(0, 1, 1);
+  EXPECT_FALSE(stats_off[0].relocalize_waiting);
+  EXPECT_FALSE(stats_off[1].relocalized);
   EXPECT_GT(error_off_m, 2 * error_m + 0.5);
+  // Searching again every third frame: the two frames between wait without a search (nothing
+  // applied, no keyframe detection), the third searches and finds the camera.
+  const auto [stats_3, first_move_3_m, error_3_m] = run(VisionOptions().relocalize_max_score_px, 3, 3);
+  for (int i : {1, 2}) {
+    EXPECT_TRUE(stats_3[i].relocalize_waiting) << i;
+    EXPECT_EQ(stats_3[i].features_used(), 0) << i;
+    EXPECT_EQ(stats_3[i].stage_ms[kStageCorners], 0) << i;
+  }
+  EXPECT_TRUE(stats_3[3].relocalized);
+  EXPECT_LT(error_3_m, 0.8);
 }
 
 // Issue 19, eighth session: a GPS height 1.2 m low, taken on far façades as a pitch, left the pose

@@ -77,6 +77,7 @@ struct PoseBenchOptions {
   double relocalize_step_m = pose::VisionOptions{}.relocalize_step_m;
   double relocalize_distinct_px = pose::VisionOptions{}.relocalize_distinct_px;
   double relocalize_max_score_px = pose::VisionOptions{}.relocalize_max_score_px;  // issue 19, eleventh session
+  int relocalize_retry_frames = pose::VisionOptions{}.relocalize_retry_frames;
   double gyro_correlation_s = pose::PoseFilterOptions{}.gyro_correlation_s;  // issue 19
   double acquiring_sigma_px = pose::VisionOptions{}.acquiring_sigma_px;  // issue 19
   double gyro_sigma_rad_s = pose::PoseFilterOptions{}.gyro_sigma_rad_s;
@@ -538,6 +539,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.relocalize_step_m = o.relocalize_step_m;
     vo.relocalize_distinct_px = o.relocalize_distinct_px;
     vo.relocalize_max_score_px = o.relocalize_max_score_px;
+    vo.relocalize_retry_frames = o.relocalize_retry_frames;
     vo.acquisition_roll_search_deg = o.roll_search_deg;
     vo.acquisition_orientation_sigma_deg = o.acquisition_sigma_deg;
     vo.feature_bias_px = o.feature_bias_px;
@@ -1144,6 +1146,9 @@ Runner AddPoseBench(CLI::App& sub) {
                  "relocalisation is believed only where the best chamfer score is at most this, px; else nothing is applied and it searches again next frame (0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 100.0));
+  sub.add_option("--relocalize-retry-frames", o->relocalize_retry_frames, "while a relocalisation waits for a fit, it searches again every this many frames")
+      ->capture_default_str()
+      ->check(ave::cli::Range(1, 1000));
   sub.add_option("--carrier-height", o->carrier_height_m,
                  "the carried camera's height above the ground in m, applied every frame (VisionOptions::carrier_height_m; -1: the camera path's, 0: off)")
       ->capture_default_str();
