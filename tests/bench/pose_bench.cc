@@ -69,6 +69,8 @@ struct PoseBenchOptions {
   double gps_bias_sigma_m = pose::PoseFilterOptions{}.gps_bias_sigma_m;  // issue 19: multipath as a consider bias
   int seed = 0;  // added to the scenario's seed: another draw of every noise (GPS, IMU, camera)
   int seeds = 1;  // > 1: Monte Carlo over seeds seed .. seed + seeds - 1 (RunPoseSeeds)
+  double start_s = 0;         // scene time of the first frame (the filter runs GPS + inertial from 0)
+  double start_spread_s = 0;  // Monte Carlo: draw i starts at start_s + i * this (other places; issue 19, eleventh session)
   double roll_search_deg = pose::VisionOptions{}.acquisition_roll_search_deg;  // issue 19, sixth session
   int acquisition_passes = pose::VisionOptions{}.acquisition_coarse_passes;
   double lock_alignment_px = pose::VisionOptions{}.lock_alignment_px;
@@ -375,7 +377,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
   spec.camera_id = o.camera;
   for (const sim::GpsImuSpec& g : scenario->gps_imu)
     if (g.camera_id == o.camera) spec = g;
-  spec.duration_s = o.seconds;
+  spec.duration_s = o.start_s + o.seconds;
   const pose::SensorLog log = pose::FromSimulation(sim::SimulateGpsImu(world, *camera, spec, scenario->effects, scenario->seed));
 
   // Frames at the 30 Hz video rate (AVE §5), rendered once and shared by every mode.
@@ -385,8 +387,8 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
   std::vector<Rigid3d> truth;
   const WallClock::time_point render_start = WallClock::now();
   for (int f = 0; f < n; ++f) {
-    frames.push_back(sim_camera.Frame(f, f / 30.0));
-    truth.push_back(sim_camera.PoseAt(f / 30.0));
+    frames.push_back(sim_camera.Frame(f, o.start_s + f / 30.0));
+    truth.push_back(sim_camera.PoseAt(o.start_s + f / 30.0));
     if (o.footage_jpeg_quality > 0) {
       const std::vector<uint8_t> jpeg = sim::EncodeFrameJpeg(frames.back(), o.footage_jpeg_quality);
       const cv::Mat decoded = cv::imdecode(jpeg, cv::IMREAD_COLOR);
@@ -563,7 +565,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     const bool peer = run.features == 50 && run.key == "gps_imu_vision_50";
     for (int f = 0; f < n; ++f) {
       const double t_s = f / 30.0;
-      const int64_t t_ns = static_cast<int64_t>(std::llround(f * 1e9 / 30));
+      const int64_t t_ns = static_cast<int64_t>(std::llround((o.start_s + f / 30.0) * 1e9));
       Rigid3d frame_truth = truth[f];
       const sim::SimImage* frame = &frames[f];
       sim::SimImage changed;
@@ -742,7 +744,8 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
   std::printf("| mode | features used/frame | median px | p95 px | max px | point matches <= 2 px | NEES in 95 %% band | keyframes | filter ms | detect ms | EKF + unknown ms | total ms/frame | max frame ms |\n");
   std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
   std::ostringstream json;
-  json << "{\"bench\":\"pose\",\"scenario\":\"" << o.scenario << "\",\"camera\":\"" << o.camera << "\",\"seed\":" << o.seed << ",\"frames\":" << n;
+  json << "{\"bench\":\"pose\",\"scenario\":\"" << o.scenario << "\",\"camera\":\"" << o.camera << "\",\"seed\":" << o.seed << ",\"frames\":" << n
+       << ",\"start_s\":" << o.start_s;
   double default_nees_in_band = -1;
   for (const Row& r : rows) {
     const Spread s = SpreadOf(r.errors_px);
@@ -979,6 +982,7 @@ int RunPoseSeeds(const PoseBenchOptions& o) {
   std::vector<std::map<std::string, RowFigures>> runs;
   for (int i = 0; i < o.seeds; ++i) {
     one.seed = o.seed + i;
+    one.start_s = o.start_s + i * o.start_spread_s;
     std::fprintf(stderr, "ave-bench pose: seed %d (%d of %d)\n", one.seed, i + 1, o.seeds);
     std::fflush(stdout);
     const int saved = dup(STDOUT_FILENO), null = open("/dev/null", O_WRONLY);
@@ -992,10 +996,11 @@ int RunPoseSeeds(const PoseBenchOptions& o) {
     if (rc != 0) return rc;
     runs.push_back(std::move(figures));
   }
-  std::printf("ave-bench pose: %s camera %s, %.1f s, Monte Carlo over %d draws of the noise (seeds %d-%d)\n", o.scenario.c_str(), o.camera.c_str(),
-              o.seconds, o.seeds, o.seed, o.seed + o.seeds - 1);
+  std::printf("ave-bench pose: %s camera %s, %.1f s, Monte Carlo over %d draws of the noise (seeds %d-%d), starting at %.1f s + %.1f s per draw\n",
+              o.scenario.c_str(), o.camera.c_str(), o.seconds, o.seeds, o.seed, o.seed + o.seeds - 1, o.start_s, o.start_spread_s);
   std::ostringstream json;
-  json << "{\"bench\":\"pose_seeds\",\"scenario\":\"" << o.scenario << "\",\"camera\":\"" << o.camera << "\",\"seed\":" << o.seed << ",\"seeds\":" << o.seeds;
+  json << "{\"bench\":\"pose_seeds\",\"scenario\":\"" << o.scenario << "\",\"camera\":\"" << o.camera << "\",\"seed\":" << o.seed << ",\"seeds\":" << o.seeds
+       << ",\"start_s\":" << o.start_s << ",\"start_spread_s\":" << o.start_spread_s;
   for (const std::string& key : one.rows) {
     std::printf("\n%s: per draw\n| seed | median px | p95 px | NEES in band | mean NEES | ms/frame |\n| ---: | ---: | ---: | ---: | ---: | ---: |\n", key.c_str());
     std::vector<double> medians, p95s, ms;
@@ -1118,6 +1123,13 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--seed", o->seed, "added to the scenario's seed: another draw of the GPS, inertial and camera noise (0: the scenario's own)")
       ->capture_default_str()
       ->check(ave::cli::Range(0, 1000000));
+  sub.add_option("--start", o->start_s, "scene time of the first frame, s (the filter runs on GPS and inertial from 0 until then)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 3600.0));
+  sub.add_option("--start-spread", o->start_spread_s,
+                 "with --seeds: draw i starts --start + i x this seconds later, at another place of the path (the scenery's errors drawn too)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 600.0));
   sub.add_option("--seeds", o->seeds, "Monte Carlo: run the rows (default gps_imu_vision_50) on this many draws of the noise from --seed on, and summarise")
       ->capture_default_str()
       ->check(ave::cli::Range(1, 1000));
