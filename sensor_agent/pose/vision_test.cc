@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <map>
 
+#include <Eigen/Eigenvalues>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -340,6 +341,46 @@ TEST_F(VisionTest, AFrameTheModelFitsNowhereAppliesNothing) {
   EXPECT_EQ(stats.features_used(), 0);
   EXPECT_LT((ekf.world_from_camera().translation - truth.translation).norm(), 1e-9);
   EXPECT_TRUE(ekf.covariance().allFinite());
+}
+
+// Issue 19, tenth session: a wall foot's corner (a known point below the camera) is found where
+// terrain texture, kerbs and objects meet the wall, 0.6-0.7 px above the true foot at every depth,
+// so it weighs foot_variance_scale times less than a wall top. The same keyframe's matches leave the
+// pose less certain with the feet weighed down, and nothing changes when the scale is 1.
+TEST_F(VisionTest, WallFeetWeighLessThanWallTops) {
+  const scene::CameraSpec& camera = *scenario_->world.FindCamera("backpack");
+  const sim::SimulatedCamera sim_camera(scenario_->world, camera, scenario_->EffectsForCamera("backpack"), scenario_->seed);
+  const sim::SimImage frame = sim_camera.Frame(120, 4.0);
+  const Rigid3d truth = sim_camera.PoseAt(4.0);
+  const Rigid3d start(SO3Exp(Eigen::Vector3d(0.2 * kDeg, -0.2 * kDeg, 0.1 * kDeg)) * truth.rotation, truth.translation + Eigen::Vector3d(0.2, -0.1, 0));
+  auto run = [&](double foot_scale) {
+    VisionOptions options;
+    options.foot_variance_scale = foot_scale;
+    VisionTracker vision(CampusFeatureMap(scenario_->world), scene::BuildStaticMesh(scenario_->world, 2.0), camera.intrinsics, options);
+    PoseEkf ekf;
+    ekf.Initialize(0, start, 0.3, 1 * kDeg);
+    const VisionFrameStats stats = vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
+    int feet = 0;
+    for (const auto& [p, uv] : stats.point_matches) feet += p.z() < truth.translation.z();
+    EXPECT_TRUE(ekf.covariance().allFinite());
+    Eigen::Matrix<double, 6, 6> pose_covariance;  // position and orientation, the filter's own
+    const StateMatrix& P = ekf.covariance();
+    pose_covariance << P.block<3, 3>(kPos, kPos), P.block<3, 3>(kPos, kRot), P.block<3, 3>(kRot, kPos), P.block<3, 3>(kRot, kRot);
+    return std::make_tuple(stats.points_used, feet, pose_covariance);
+  };
+  const auto [used_1, feet_1, p_1] = run(1.0);
+  const auto [used_4, feet_4, p_4] = run(4.0);
+  const auto [used_1b, feet_1b, p_1b] = run(1.0);
+  EXPECT_GE(feet_1, 3) << "the frame shows wall feet";
+  EXPECT_EQ(used_1, used_4);
+  EXPECT_EQ(feet_1, feet_4);
+  // Less information from the feet: the posterior covariance is larger (positive semi-definite
+  // difference, and a larger trace), and the same scale twice gives the same filter.
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> difference(p_4 - p_1);
+  EXPECT_GT(difference.eigenvalues().minCoeff(), -1e-12);
+  const double position_4 = p_4.topLeftCorner<3, 3>().trace(), position_1 = p_1.topLeftCorner<3, 3>().trace();
+  EXPECT_GT(position_4, 1.02 * position_1);
+  EXPECT_LT((p_1b - p_1).norm(), 1e-12);
 }
 
 // Issue 19, tenth session: a frame whose left half a near object covers fits nowhere as a whole,
