@@ -206,7 +206,7 @@ struct VisionOptions {
   // eleventh session). Over 13 draws the right first relocalisations scored 2.5-3.2 px; the two
   // wrong ones (a tree over the façades' tops, 3 m off) 4.6 and 5.2. A frame that fits nowhere this
   // well applies nothing, counts neither towards the lock nor the loss, and the search runs again
-  // on the next frame (VisionFrameStats::relocalize_waiting). 0: off.
+  // relocalize_retry_frames later (VisionFrameStats::relocalize_waiting). 0: off.
   double relocalize_max_score_px = 4;
   // ... and while it waits, the search (~250 ms on one core) runs again on every this many frames;
   // the frames between apply nothing and cost what a tracked frame costs. 1: every frame.

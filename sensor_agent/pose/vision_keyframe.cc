@@ -26,8 +26,8 @@ constexpr double kDegToRad = 3.14159265358979323846 / 180;
 // the model's edges from positions on a horizontal grid around the filter's; the filter moves to
 // the best one when it fits clearly better than where it is. kWaiting (nothing moved) when even the
 // best fit is poor: a wrong position can then score best by chance (a tree over the façades' tops).
-VisionTracker::Impl::Relocation VisionTracker::Impl::Relocalize(PoseEkf& ekf, const cv::Mat& edge_distance, const cv::Mat& skyline_distance, double roll_search,
-                                     double roll_step) {
+VisionTracker::Impl::Relocation VisionTracker::Impl::Relocalize(PoseEkf& ekf, const cv::Mat& edge_distance, const cv::Mat& skyline_distance,
+                                                                double roll_search, double roll_step) {
   const Eigen::Vector2d centre(k.cx, k.cy);
   const Eigen::Vector3d here = ekf.world_from_camera().translation;
   auto fit = [&](const Eigen::Vector3d& position) {
