@@ -97,6 +97,10 @@ struct PoseBenchOptions {
   double carrier_height_correlation_s = pose::VisionOptions{}.carrier_height_correlation_s;
   double nis_short_gain = pose::VisionOptions{}.nis_short_gain;
   double landmark_bias_px = pose::VisionOptions{}.landmark_bias_px;  // issue 19: reported covariance follows the innovations
+  // Issue 19, twelfth session: the joint mode's own noise and size, for its sweep.
+  double landmark_sigma_px = pose::VisionOptions{}.landmark_sigma_px;
+  int max_state_points = pose::VisionOptions{}.max_state_points;
+  double join_depth_sigma_scale = pose::VisionOptions{}.join_depth_sigma_scale;
   std::string segments = pose::VisionOptions{}.segment_detector == pose::SegmentDetector::kLsd ? "lsd" : "fld";  // issue 19
   double feature_shared_bias_px = pose::VisionOptions{}.feature_shared_bias_px;
   double feature_class_bias_px = pose::VisionOptions{}.feature_class_bias_px;  // issue 19, ninth session
@@ -553,6 +557,9 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.carrier_height_correlation_s = o.carrier_height_correlation_s;
     vo.nis_short_gain = o.nis_short_gain;
     vo.landmark_bias_px = o.landmark_bias_px;
+    vo.landmark_sigma_px = o.landmark_sigma_px;
+    vo.max_state_points = o.max_state_points;
+    vo.join_depth_sigma_scale = o.join_depth_sigma_scale;
     vo.segment_detector = o.segments == "fld" ? pose::SegmentDetector::kFastLine : pose::SegmentDetector::kLsd;
     vo.feature_shared_bias_px = o.feature_shared_bias_px;
     vo.feature_class_bias_px = o.feature_class_bias_px;
@@ -1083,6 +1090,15 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--landmark-bias-px", o->landmark_bias_px, "persisting error of each landmark's sightings (joint mode), px, a consider bias (0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 10.0));
+  sub.add_option("--landmark-sigma-px", o->landmark_sigma_px, "extra noise of each landmark's sighting (joint mode), px")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 10.0));
+  sub.add_option("--max-state-points", o->max_state_points, "unknown features in the filter's state at a time (joint mode)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0, 200));
+  sub.add_option("--join-depth-sigma-scale", o->join_depth_sigma_scale, "a joining feature's depth sigma times this (joint mode)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.1, 10.0));
   sub.add_option("--nis-short-gain", o->nis_short_gain,
                  "running-mean gain of the frames' NIS whose ratio to the long mean scales the reported covariance (0: off)")
       ->capture_default_str()
