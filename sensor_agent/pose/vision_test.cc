@@ -52,20 +52,23 @@ class VisionTest : public ::testing::Test {
   static VisionTracker CampusTracker(const PinholeIntrinsics& k, const VisionOptions& options = VisionOptions()) {
     return VisionTracker(CampusFeatureMap(scenario_->world), scene::BuildStaticMesh(scenario_->world, 2.0), k, options);
   }
-  // The relocalisation tests' first frame: the backpack at 4 s, and a start as GPS multipath among
-  // the buildings leaves it (2.3 m and 1.6 m off, turned 0.2-0.3 deg).
-  struct OffStart {
+  // The backpack's frame at 4 s (frame 120) and its true pose: most tests' keyframe.
+  struct View {
     sim::SimImage frame;
-    Rigid3d truth, start;
+    Rigid3d truth;
   };
-  static OffStart BackpackStartedOff() {
+  static View BackpackAt4s() {
     const scene::CameraSpec& camera = *scenario_->world.FindCamera("backpack");
     const sim::SimulatedCamera sim_camera(scenario_->world, camera, scenario_->EffectsForCamera("backpack"), scenario_->seed);
-    OffStart s{sim_camera.Frame(120, 4.0), sim_camera.PoseAt(4.0), {}};
-    s.start = Rigid3d(SO3Exp(Eigen::Vector3d(0.2 * kDeg, 0.3 * kDeg, -0.2 * kDeg)) * s.truth.rotation,
-                      s.truth.translation + Eigen::Vector3d(2.3, -1.6, 0));
-    return s;
+    return {sim_camera.Frame(120, 4.0), sim_camera.PoseAt(4.0)};
   }
+  // `truth` turned by `turn_deg` (world rotation vector, degrees) and moved by `offset_m`.
+  static Rigid3d Off(const Rigid3d& truth, const Eigen::Vector3d& turn_deg, const Eigen::Vector3d& offset_m) {
+    return Rigid3d(SO3Exp(turn_deg * kDeg) * truth.rotation, truth.translation + offset_m);
+  }
+  // The relocalisation tests' start: as GPS multipath among the buildings leaves it (2.3 m and
+  // 1.6 m off, turned 0.2-0.3 deg).
+  static Rigid3d MultipathStart(const Rigid3d& truth) { return Off(truth, {0.2, 0.3, -0.2}, {2.3, -1.6, 0}); }
   static sim::Scenario* scenario_;
 };
 sim::Scenario* VisionTest::scenario_ = nullptr;
@@ -142,7 +145,7 @@ TEST_F(VisionTest, StabilisesAPerturbedBackpackPoseToAFewPixels) {
   const std::vector<Eigen::Vector3d> visible = vision.VisiblePoints(truth);
   ASSERT_GE(visible.size(), 6u);
   PoseEkf ekf;
-  const Rigid3d start(SO3Exp(Eigen::Vector3d(0.5 * kDeg, -0.8 * kDeg, 1.5 * kDeg)) * truth.rotation, truth.translation + Eigen::Vector3d(0.4, -0.3, 0.1));
+  const Rigid3d start = Off(truth, {0.5, -0.8, 1.5}, {0.4, -0.3, 0.1});
   ekf.Initialize(0, start, 0.5, 2 * kDeg);
   const double before = MedianMisregistration(camera.intrinsics, truth, start, visible);
   EXPECT_GT(before, 10);
@@ -205,10 +208,8 @@ TEST_F(VisionTest, UnknownFeaturesAreTrackedOnlyWhenSomethingUsesThem) {
 // keyframe, and each stabilises the perturbed pose.
 TEST_F(VisionTest, BothSegmentDetectorsMatchTheModelLinesAndStabiliseThePose) {
   const scene::CameraSpec& camera = *scenario_->world.FindCamera("backpack");
-  const sim::SimulatedCamera sim_camera(scenario_->world, camera, scenario_->EffectsForCamera("backpack"), scenario_->seed);
-  const sim::SimImage frame = sim_camera.Frame(120, 4.0);
-  const Rigid3d truth = sim_camera.PoseAt(4.0);
-  const Rigid3d start(SO3Exp(Eigen::Vector3d(0.5 * kDeg, -0.8 * kDeg, 1.5 * kDeg)) * truth.rotation, truth.translation + Eigen::Vector3d(0.4, -0.3, 0.1));
+  const auto [frame, truth] = BackpackAt4s();
+  const Rigid3d start = Off(truth, {0.5, -0.8, 1.5}, {0.4, -0.3, 0.1});
   for (const SegmentDetector detector : {SegmentDetector::kFastLine, SegmentDetector::kLsd}) {
     VisionOptions options;
     options.segment_detector = detector;
@@ -228,7 +229,8 @@ TEST_F(VisionTest, BothSegmentDetectorsMatchTheModelLinesAndStabiliseThePose) {
 // take wrong corners. The relocalisation's position search finds the camera on the first frame.
 TEST_F(VisionTest, RelocalisationFindsACameraMetresFromItsGpsPosition) {
   const PinholeIntrinsics& k = scenario_->world.FindCamera("backpack")->intrinsics;
-  const auto [frame, truth, start] = BackpackStartedOff();
+  const auto [frame, truth] = BackpackAt4s();
+  const Rigid3d start = MultipathStart(truth);
   auto run = [&](double extent_m, double distinct_px = VisionOptions().relocalize_distinct_px) {
     VisionOptions options;
     options.relocalize_extent_m = extent_m;
@@ -260,7 +262,8 @@ TEST_F(VisionTest, RelocalisationFindsACameraMetresFromItsGpsPosition) {
 // runs again on the next frame, which finds the camera.
 TEST_F(VisionTest, RelocalisationWaitsForAFrameTheModelFitsWell) {
   const PinholeIntrinsics& k = scenario_->world.FindCamera("backpack")->intrinsics;
-  const auto [frame, truth, start] = BackpackStartedOff();
+  const auto [frame, truth] = BackpackAt4s();
+  const Rigid3d start = MultipathStart(truth);
   sim::SimImage flipped = frame;
   cv::Mat image(flipped.height, flipped.width, CV_8UC3, flipped.bgr.data());
   cv::flip(image.clone(), image, -1);
@@ -311,9 +314,7 @@ TEST_F(VisionTest, RelocalisationWaitsForAFrameTheModelFitsWell) {
 // lifts it on the first frame. A filter under the ground finds no ground below and applies nothing.
 TEST_F(VisionTest, ACarriedCameraIsHeldAtItsHeightAboveTheGround) {
   const scene::CameraSpec& camera = *scenario_->world.FindCamera("backpack");
-  const sim::SimulatedCamera sim_camera(scenario_->world, camera, scenario_->EffectsForCamera("backpack"), scenario_->seed);
-  const sim::SimImage frame = sim_camera.Frame(120, 4.0);
-  const Rigid3d truth = sim_camera.PoseAt(4.0);
+  const auto [frame, truth] = BackpackAt4s();
   auto run = [&](double carrier_height_m, double dz_m) {
     VisionOptions options;
     options.carrier_height_m = carrier_height_m;
@@ -343,9 +344,7 @@ TEST_F(VisionTest, ACarriedCameraIsHeldAtItsHeightAboveTheGround) {
 // the search does not move the filter to such a fit either.
 TEST_F(VisionTest, AFrameTheModelFitsNowhereAppliesNothing) {
   const scene::CameraSpec& camera = *scenario_->world.FindCamera("backpack");
-  const sim::SimulatedCamera sim_camera(scenario_->world, camera, scenario_->EffectsForCamera("backpack"), scenario_->seed);
-  sim::SimImage elsewhere = sim_camera.Frame(120, 4.0);
-  const Rigid3d truth = sim_camera.PoseAt(4.0);
+  auto [elsewhere, truth] = BackpackAt4s();
   cv::Mat image(elsewhere.height, elsewhere.width, CV_8UC3, elsewhere.bgr.data());
   cv::flip(image.clone(), image, -1);
   VisionTracker vision = CampusTracker(camera.intrinsics);
@@ -365,10 +364,8 @@ TEST_F(VisionTest, AFrameTheModelFitsNowhereAppliesNothing) {
 // pose less certain with the feet weighed down, and nothing changes when the scale is 1.
 TEST_F(VisionTest, WallFeetWeighLessThanWallTops) {
   const scene::CameraSpec& camera = *scenario_->world.FindCamera("backpack");
-  const sim::SimulatedCamera sim_camera(scenario_->world, camera, scenario_->EffectsForCamera("backpack"), scenario_->seed);
-  const sim::SimImage frame = sim_camera.Frame(120, 4.0);
-  const Rigid3d truth = sim_camera.PoseAt(4.0);
-  const Rigid3d start(SO3Exp(Eigen::Vector3d(0.2 * kDeg, -0.2 * kDeg, 0.1 * kDeg)) * truth.rotation, truth.translation + Eigen::Vector3d(0.2, -0.1, 0));
+  const auto [frame, truth] = BackpackAt4s();
+  const Rigid3d start = Off(truth, {0.2, -0.2, 0.1}, {0.2, -0.1, 0});
   auto run = [&](double foot_scale) {
     VisionOptions options;
     options.foot_variance_scale = foot_scale;
@@ -405,13 +402,11 @@ TEST_F(VisionTest, WallFeetWeighLessThanWallTops) {
 // (local_fit_px 0), or with a lock just formed, the frame applies nothing.
 TEST_F(VisionTest, AHalfCoveredFrameUsesTheFeaturesWhoseOutlineFits) {
   const scene::CameraSpec& camera = *scenario_->world.FindCamera("backpack");
-  const sim::SimulatedCamera sim_camera(scenario_->world, camera, scenario_->EffectsForCamera("backpack"), scenario_->seed);
-  const sim::SimImage clear = sim_camera.Frame(120, 4.0);
+  const auto [clear, truth] = BackpackAt4s();
   sim::SimImage covered = clear;
-  const Rigid3d truth = sim_camera.PoseAt(4.0);
   cv::Mat image(covered.height, covered.width, CV_8UC3, covered.bgr.data());
   image(cv::Rect(0, 0, covered.width / 2, covered.height)).setTo(cv::Scalar(40, 90, 200));  // a bus side, no edges
-  const Rigid3d start(SO3Exp(Eigen::Vector3d(0.05 * kDeg, -0.1 * kDeg, 0.05 * kDeg)) * truth.rotation, truth.translation + Eigen::Vector3d(0.05, -0.05, 0.02));
+  const Rigid3d start = Off(truth, {0.05, -0.1, 0.05}, {0.05, -0.05, 0.02});
   const std::vector<Eigen::Vector3d> visible = CampusTracker(camera.intrinsics).VisiblePoints(truth);
   struct Case {
     double local_fit_px, after_lock_s;
