@@ -93,6 +93,8 @@ void PoseEkf::Initialize(int64_t t_ns, const Rigid3d& world_from_camera, double 
   bias_ids_.clear();
   bias_sigma_px_.clear();
   bias_sensitivity_.resize(kErrorDim, 0);
+  gps_bias_landmark_sensitivity_.setZero(landmarks_.size(), 3);
+  bias_landmark_sensitivity_.resize(landmarks_.size(), 0);
   initialized_ = true;
 }
 
@@ -162,13 +164,14 @@ UpdateResult PoseEkf::Correct(const Eigen::Matrix<double, M, 1>& innovation, con
   reported_d2 = gate_R ? innovation.dot(Eigen::LDLT<Eigen::Matrix<double, M, M>>(H * PHt + *gate_R).solve(innovation)) : d2;
   if (!gate_R && d2 > gate_chi2) return {Rejection::kGate, d2};
   const Eigen::Matrix<double, kErrorDim, M> K = solve(PHt.transpose()).transpose();
+  Eigen::Matrix<double, Eigen::Dynamic, M> KL(0, M);
   if (!landmark_ids_.empty()) {
-    const Eigen::Matrix<double, Eigen::Dynamic, M> KL = solve((cross_.transpose() * H.transpose()).transpose()).transpose();
+    KL = solve((cross_.transpose() * H.transpose()).transpose()).transpose();
     CorrectLandmarks<M>(K, KL, S, innovation);
   }
   const StateMatrix I_KH = StateMatrix::Identity() - K * H;
   P_ = I_KH * P_ * I_KH.transpose() + K * R * K.transpose();  // Joseph form
-  CorrectBiases<M>(K, H);
+  CorrectBiases<M>(K, KL, H * bias_sensitivity_, H * gps_bias_sensitivity_);
   Inject(K * innovation);
   Condition();
   return {Rejection::kNone, reported_d2};
@@ -195,21 +198,32 @@ void PoseEkf::PropagateBiases(const StateMatrix& transition) {
   bias_sensitivity_ = (transition * bias_sensitivity_).eval();
 }
 
-// The error after an update with gain K is (I - K H) e - K (noise + b_current): every bias's
-// sensitivity goes through (I - K H), and the bias this measurement carries adds -K.
+// The error after an update with gain K is e - K (H e + noise + b_current), H e over the full
+// state (pose and landmarks): every bias's sensitivity G goes to G - K H G, and the bias this
+// measurement carries adds -K; the landmarks' rows alike with their gains KL.
 template <int M>
-void PoseEkf::CorrectBiases(const Eigen::Matrix<double, kErrorDim, M>& K, const Eigen::Matrix<double, M, kErrorDim>& H) {
+void PoseEkf::CorrectBiases(const Eigen::Matrix<double, kErrorDim, M>& K, const Eigen::Matrix<double, Eigen::Dynamic, M>& KL,
+                            const Eigen::Matrix<double, M, Eigen::Dynamic>& HGb, const Eigen::Matrix<double, M, 3>& HGg) {
+  const bool landmarks = KL.rows() > 0 && KL.rows() == gps_bias_landmark_sensitivity_.rows();
   if (options_.gps_bias_sigma_m > 0) {
-    gps_bias_sensitivity_ -= K * (H * gps_bias_sensitivity_);
+    gps_bias_sensitivity_ -= K * HGg;
+    if (landmarks) gps_bias_landmark_sensitivity_ -= KL * HGg;
     if constexpr (M == 3) {
-      if (applying_gps_) gps_bias_sensitivity_ -= K;  // this fix carries the bias
+      if (applying_gps_) {  // this fix carries the bias
+        gps_bias_sensitivity_ -= K;
+        if (landmarks) gps_bias_landmark_sensitivity_ -= KL;
+      }
     }
   }
   if (bias_ids_.empty()) return;
-  bias_sensitivity_ -= K * (H * bias_sensitivity_);
+  bias_sensitivity_ -= K * HGb;
+  if (landmarks) bias_landmark_sensitivity_ -= KL * HGb;
   if constexpr (M == 2) {
-    for (const int c : current_biases_)
-      if (c >= 0) bias_sensitivity_.middleCols<2>(2 * c) -= K;
+    for (const int c : current_biases_) {
+      if (c < 0) continue;
+      bias_sensitivity_.middleCols<2>(2 * c) -= K;
+      if (landmarks) bias_landmark_sensitivity_.middleCols<2>(2 * c) -= KL;
+    }
   }
 }
 
@@ -259,6 +273,14 @@ void PoseEkf::SetConsideredOrientation(const Eigen::Matrix3d& covariance) {
   considered_rot_ = c;
 }
 
+void PoseEkf::AppendLandmarkSensitivities(const Eigen::Matrix<double, 3, kErrorDim>& Jx) {
+  const Eigen::Index n = gps_bias_landmark_sensitivity_.rows();
+  gps_bias_landmark_sensitivity_.conservativeResize(n + 3, Eigen::NoChange);
+  gps_bias_landmark_sensitivity_.bottomRows<3>() = Jx * gps_bias_sensitivity_;
+  bias_landmark_sensitivity_.conservativeResize(n + 3, bias_sensitivity_.cols());
+  bias_landmark_sensitivity_.bottomRows(3) = Jx * bias_sensitivity_;
+}
+
 int PoseEkf::LandmarkIndex(int64_t id) const {
   for (size_t i = 0; i < landmark_ids_.size(); ++i)
     if (landmark_ids_[i] == id) return static_cast<int>(i);
@@ -275,6 +297,7 @@ bool PoseEkf::AddLandmark(int64_t id, const Eigen::Vector3d& point_in_world, con
   landmarks_.segment<3>(n) = point_in_world;
   cross_.conservativeResize(kErrorDim, n + 3);
   cross_.middleCols<3>(n).setZero();
+  AppendLandmarkSensitivities(Eigen::Matrix<double, 3, kErrorDim>::Zero());  // independent of the pose and its biases
   Eigen::MatrixXd grown = Eigen::MatrixXd::Zero(n + 3, n + 3);
   grown.topLeftCorner(n, n) = landmark_cov_;
   grown.bottomRightCorner<3, 3>() = c;
@@ -310,6 +333,7 @@ bool PoseEkf::AddLandmarkOnRay(int64_t id, const PinholeIntrinsics& k, const Eig
   landmarks_.segment<3>(n) = point;
   cross_.conservativeResize(kErrorDim, n + 3);
   cross_.middleCols<3>(n) = P_ * Jx.transpose();
+  AppendLandmarkSensitivities(Jx);  // the point inherits the pose's error, biases included
   Eigen::MatrixXd grown(n + 3, n + 3);
   grown.topLeftCorner(n, n) = landmark_cov_;
   if (n > 0) {
@@ -344,6 +368,12 @@ void PoseEkf::RemoveLandmark(int64_t id) {
   Eigen::MatrixXd x(kErrorDim, n - 3);
   x << cross_.leftCols(at), cross_.rightCols(tail);
   cross_ = std::move(x);
+  const auto drop_rows = [&](auto& m) {
+    m.middleRows(at, tail) = m.bottomRows(tail).eval();
+    m.conservativeResize(n - 3, Eigen::NoChange);
+  };
+  drop_rows(gps_bias_landmark_sensitivity_);
+  drop_rows(bias_landmark_sensitivity_);
   Eigen::MatrixXd c(n - 3, n - 3);
   c.topLeftCorner(at, at) = landmark_cov_.topLeftCorner(at, at);
   c.topRightCorner(at, tail) = landmark_cov_.topRightCorner(at, tail);
@@ -382,7 +412,11 @@ UpdateResult PoseEkf::UpdateLandmark(const PinholeIntrinsics& k, int64_t id, con
   const Eigen::Matrix<double, Eigen::Dynamic, 2> KL = ldlt.solve(LHt.transpose()).transpose();
   P_ -= K * S * K.transpose();
   current_biases_ = {bias.id >= 0 && std::isfinite(bias.sigma_px) && bias.sigma_px > 0 ? BiasIndex(bias.id, bias.sigma_px) : -1, -1};
-  CorrectBiases<2>(K, Hp);  // the landmarks' own sensitivities are not kept (pose part only)
+  // The sighting measures pose minus landmark: its sensitivity to the biases has both rows.
+  Eigen::Matrix<double, 2, Eigen::Dynamic> HGb = Hp * bias_sensitivity_;
+  if (HGb.cols() > 0) HGb += Hl * bias_landmark_sensitivity_.middleRows<3>(3 * i);
+  const Eigen::Matrix<double, 2, 3> HGg = Hp * gps_bias_sensitivity_ + Hl * gps_bias_landmark_sensitivity_.middleRows<3>(3 * i);
+  CorrectBiases<2>(K, KL, HGb, HGg);
   current_biases_ = {-1, -1};
   CorrectLandmarks<2>(K, KL, S, innovation);
   Inject(K * innovation);
@@ -474,6 +508,8 @@ int PoseEkf::BiasIndex(int64_t id, double sigma_px) {
     const Eigen::Index n = 2 * static_cast<Eigen::Index>(bias_ids_.size()), at = 2 * static_cast<Eigen::Index>(weakest);
     bias_sensitivity_.middleCols(at, n - at - 2) = bias_sensitivity_.rightCols(n - at - 2).eval();
     bias_sensitivity_.conservativeResize(Eigen::NoChange, n - 2);
+    bias_landmark_sensitivity_.middleCols(at, n - at - 2) = bias_landmark_sensitivity_.rightCols(n - at - 2).eval();
+    bias_landmark_sensitivity_.conservativeResize(Eigen::NoChange, n - 2);
     bias_ids_.erase(bias_ids_.begin() + static_cast<std::ptrdiff_t>(weakest));
     bias_sigma_px_.erase(bias_sigma_px_.begin() + static_cast<std::ptrdiff_t>(weakest));
     for (int& c : current_biases_) c -= c > static_cast<int>(weakest);
@@ -485,6 +521,8 @@ int PoseEkf::BiasIndex(int64_t id, double sigma_px) {
     bias_sigma_px_.push_back(sigma_px);
     bias_sensitivity_.conservativeResize(Eigen::NoChange, 2 * static_cast<Eigen::Index>(bias_ids_.size()));
     bias_sensitivity_.rightCols<2>().setZero();
+    bias_landmark_sensitivity_.conservativeResize(landmarks_.size(), 2 * static_cast<Eigen::Index>(bias_ids_.size()));
+    bias_landmark_sensitivity_.rightCols<2>().setZero();
   }
   bias_sigma_px_[index] = sigma_px;
   return index;

@@ -225,7 +225,7 @@ class PoseEkf {
   // A landmark seen at pixel `uv`: updates pose and every landmark (2x(15+3N) Jacobian).
   // `extra_variance_px2` adds to the pixel noise (e.g. a KLT track whose error persists).
   // `bias`: a persisting error of this landmark's sightings (a KLT track's offset repeats), as
-  // UpdatePoint's biases (pose part only).
+  // UpdatePoint's biases; the sensitivities are kept for the pose and the landmarks alike.
   UpdateResult UpdateLandmark(const PinholeIntrinsics& k, int64_t id, const Eigen::Vector2d& uv, double extra_variance_px2 = 0,
                               PointBias bias = {});
   // Covariance of the full state [error state (15: pose, rates, gyro bias), landmarks (3N)] (for tests and NEES).
@@ -277,10 +277,14 @@ class PoseEkf {
   double reported_scale_ = 1;  // SetReportedScale
   // Per-feature persisting biases (UpdatePoint's bias_id): ids, their sigmas (px) and the error
   // state's sensitivity to each, two columns per bias (u, v); empty unless used. The landmarks'
-  // own sensitivities are not kept (joint mode: the pose part only, an approximation).
+  // rows are kept apart (below); the reported covariance reads the pose's.
   void PropagateBiases(const StateMatrix& transition);  // G = transition * G
+  // `KL`: the landmarks' gains (0 rows without landmarks); `HGb`, `HGg`: the measurement's
+  // sensitivity to the per-feature and GPS biases before this update (H times the full state's
+  // sensitivities, landmark rows included).
   template <int M>
-  void CorrectBiases(const Eigen::Matrix<double, kErrorDim, M>& K, const Eigen::Matrix<double, M, kErrorDim>& H);
+  void CorrectBiases(const Eigen::Matrix<double, kErrorDim, M>& K, const Eigen::Matrix<double, Eigen::Dynamic, M>& KL,
+                     const Eigen::Matrix<double, M, Eigen::Dynamic>& HGb, const Eigen::Matrix<double, M, 3>& HGg);
   Eigen::Matrix<double, kErrorDim, 3> gps_bias_sensitivity_ = Eigen::Matrix<double, kErrorDim, 3>::Zero();  // gps_bias_sigma_m
   bool applying_gps_ = false;  // the update in progress is a fix (UpdatePosition)
   std::vector<int64_t> bias_ids_;
@@ -288,6 +292,14 @@ class PoseEkf {
   Eigen::Matrix<double, kErrorDim, Eigen::Dynamic> bias_sensitivity_;
   std::array<int, 2> current_biases_ = {-1, -1};  // column pairs of the biases the point update in progress carries (-1: none)
   int BiasIndex(int64_t id, double sigma_px);  // the column pair of bias `id`, added (zero sensitivity) when new
+  // The landmarks' rows of the same sensitivities (3N x 3 and 3N x 2B; issue 19, twelfth session).
+  // A landmark placed from the pose (AddLandmarkOnRay) carries the pose's error, biases included:
+  // its rows start as J G. Its sightings then measure pose minus landmark, in which that shared
+  // part cancels, so they cannot shrink the pose's bias covariance; without these rows they did
+  // (the joint mode's pose under-covered 2-3 s after its first landmarks joined, mean NEES 14).
+  Eigen::Matrix<double, Eigen::Dynamic, 3> gps_bias_landmark_sensitivity_;
+  Eigen::MatrixXd bias_landmark_sensitivity_;
+  void AppendLandmarkSensitivities(const Eigen::Matrix<double, 3, kErrorDim>& Jx);  // a new landmark's rows: Jx G
 };
 
 }  // namespace ave::pose
