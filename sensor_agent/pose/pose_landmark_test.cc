@@ -256,5 +256,47 @@ TEST(PoseEkfLandmarks, LandmarksPlacedFromABiasedPoseKeepItsReportedCovarianceCo
   EXPECT_LT(nees, 7.5) << "bias share " << bias_share;
 }
 
+// The landmarks' rows of the bias sensitivities stay in step with the biases and the landmarks
+// through every change of size: landmarks that join before any bias exists, biases that join after,
+// more biases than the filter keeps (the weakest is forgotten, 256 at most), a landmark removed from
+// the middle, and a new Initialize. The covariance stays finite and symmetric throughout.
+TEST(PoseEkfLandmarks, BiasSensitivitiesFollowEveryChangeOfSize) {
+  const Rigid3d truth = LookAt(Eigen::Vector3d(0, 0, 1.7), Eigen::Vector3d(0, 10, 1.7));
+  PoseEkf f;
+  f.Initialize(0, truth, 0.3, 1 * kDeg);
+  for (int64_t id = 0; id < 3; ++id)
+    ASSERT_TRUE(f.AddLandmarkOnRay(id, Camera(), Eigen::Vector2d(200 + 100 * id, 200), 10 + id, 0.5, 1.0));
+  auto healthy = [&](const char* when) {
+    const StateMatrix b = f.ConsideredBiasCovariance();
+    EXPECT_TRUE(b.allFinite()) << when;
+    EXPECT_TRUE(b.isApprox(b.transpose(), 1e-9)) << when;
+    EXPECT_TRUE(f.FullCovariance().allFinite()) << when;
+    EXPECT_TRUE(f.PoseCovariance().allFinite()) << when;
+  };
+  // 300 corners, each with its own bias, interleaved with landmark sightings carrying theirs.
+  for (int c = 0; c < 300; ++c) {
+    const Eigen::Vector3d corner(-8 + (c % 17), 20 + (c % 7), (c % 5) * 2.0);
+    const auto uv = ProjectToPixel(Camera(), truth.Inverse() * corner);
+    ASSERT_TRUE(uv);
+    f.UpdatePoint(Camera(), corner, *uv + Eigen::Vector2d(0.2, -0.1), 0, {PointBias{1000 + c, 1.0}, PointBias{}});
+    const int64_t id = c % 3;
+    if (f.HasLandmark(id)) f.UpdateLandmark(Camera(), id, *ProjectToPixel(Camera(), truth.Inverse() * f.Landmark(id)->first), 0, {2000 + id, 2.0});
+    if (c == 150) {
+      f.RemoveLandmark(1);
+      ASSERT_TRUE(f.AddLandmarkOnRay(7, Camera(), Eigen::Vector2d(320, 260), 12, 0.5, 1.0));
+    }
+  }
+  EXPECT_EQ(f.considered_bias_count(), 256);
+  EXPECT_EQ(f.landmark_count(), 3);
+  healthy("after 300 biases");
+  f.RemoveLandmark(0);
+  healthy("after a removal");
+  f.Initialize(1, truth, 0.3, 1 * kDeg);  // the landmarks stay; their bias rows start again empty
+  EXPECT_EQ(f.considered_bias_count(), 0);
+  EXPECT_TRUE(f.UpdateLandmark(Camera(), 7, *ProjectToPixel(Camera(), truth.Inverse() * f.Landmark(7)->first), 0, {5, 1.0}).accepted());
+  healthy("after Initialize");
+  EXPECT_EQ(f.considered_bias_count(), 1);
+}
+
 }  // namespace
 }  // namespace ave::pose
