@@ -54,6 +54,7 @@ std::string VisionOptions::Check() const {
   if (!(tracked_sigma_px >= 0)) return "tracked_sigma_px must be >= 0";
   if (!(robust_residual_px >= 0 && std::isfinite(robust_residual_px))) return "robust_residual_px must be finite and >= 0";
   if (!(feature_class_bias_px >= 0 && std::isfinite(feature_class_bias_px))) return "feature_class_bias_px must be finite and >= 0";
+  if (corners_on_edges < 0 || corners_on_edges > 2) return "corners_on_edges must be 0, 1 or 2";
   if (!(foot_variance_scale >= 1 && std::isfinite(foot_variance_scale))) return "foot_variance_scale must be finite and >= 1";
   if (!(local_fit_px >= 0 && std::isfinite(local_fit_px)) || !(local_fit_after_lock_s >= 0 && std::isfinite(local_fit_after_lock_s)))
     return "local_fit_px and local_fit_after_lock_s must be finite and >= 0";
@@ -215,6 +216,16 @@ Track VisionTracker::Impl::NewTrack(const PoseEkf& ekf, const cv::Point2f& px, c
 VisionTracker::VisionTracker(FeatureMap map, const TriangleMesh& mesh, PinholeIntrinsics intrinsics, VisionOptions options)
     : impl_(std::make_unique<Impl>()) {
   impl_->map = std::move(map);
+  // Each known point's model edges: the lines with an end on it (the wireframe's corners are
+  // shared to the millimetre).
+  impl_->point_edges.assign(impl_->map.points.size(), {});
+  for (size_t i = 0; i < impl_->map.points.size(); ++i) {
+    const Eigen::Vector3d& p = impl_->map.points[i];
+    for (const LineFeature& l : impl_->map.lines) {
+      if ((l.a - p).norm() < 1e-3) impl_->point_edges[i].push_back(l.b - p);
+      else if ((l.b - p).norm() < 1e-3) impl_->point_edges[i].push_back(l.a - p);
+    }
+  }
   impl_->bvh = MeshBvh(mesh);
   impl_->ground_triangle.assign(mesh.TriangleCount(), false);
   for (size_t i = 0; i < mesh.TriangleCount() && i < mesh.triangle_material.size(); ++i)
@@ -338,7 +349,10 @@ void VisionTracker::Impl::TrackKnownByKlt(const PoseEkf& ekf, Frame& f) {
   const std::vector<bool> ok = Klt(f, keyframe_pyramid, before, after);
   std::vector<KnownTrack> kept;
   for (size_t i = 0; i < known.size(); ++i)
-    if (ok[i]) kept.push_back({known[i].index, after[i], known[i].key_px});
+    if (ok[i]) {
+      kept.push_back(known[i]);
+      kept.back().px = after[i];
+    }
   known = std::move(kept);
 }
 
@@ -419,7 +433,8 @@ void VisionTracker::Impl::RefineTrackedKnown(Frame& f) {
     cv::cornerSubPix(f.gray, raw, cv::Size(4, 4), cv::Size(-1, -1), cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 10, 0.03));
     for (size_t i = 0; i < raw.size(); ++i) known[i].px = raw[i];
   }
-  for (const cv::Point2f& p : ToIdeal(raw)) f.known_uv.emplace_back(p.x, p.y);
+  const std::vector<cv::Point2f> ideal = ToIdeal(raw);
+  for (size_t i = 0; i < ideal.size(); ++i) f.known_uv.push_back(Eigen::Vector2d(ideal[i].x, ideal[i].y) + known[i].correction);
 }
 
 // The lock is weak when too few known features are tracked (min_tracked_known), too many fall

@@ -55,6 +55,7 @@ struct KnownTrack {
   cv::Point2f px;     // in the (distorted) frame
   cv::Point2f key_px;  // where it was on the keyframe, which KLT matches against (no drift)
   double variance_scale = 1;  // its keyframe match's robust weight (VisionOptions::robust_residual_px), kept along the track
+  Eigen::Vector2d correction = Eigen::Vector2d::Zero();  // ideal px from the keyframe's detected corner to where its edges meet
 };
 
 // Charges the CPU time since the last lap to a stage.
@@ -120,6 +121,7 @@ struct VisionTracker::Impl {
   };
 
   FeatureMap map;
+  std::vector<std::vector<Eigen::Vector3d>> point_edges;  // per known point, its model edges (to their other ends), local frame
   MeshBvh bvh;
   std::vector<bool> ground_triangle;  // per mesh triangle: terrain or road (ConstrainHeight)
   int64_t last_height_ns = INT64_MIN;  // the carried camera's height last applied (ConstrainHeight)
@@ -277,6 +279,7 @@ struct VisionTracker::Impl {
   PoseEkf CoarsePass(const PoseEkf& ekf, Frame& f, const ImageAlignment& alignment, bool turn);
   void FinePass(PoseEkf& ekf, Frame& f, const PoseEkf& coarse, const std::vector<Segment>& segments);
   std::vector<double> RobustScales(const PoseEkf& ekf, const Frame& f, const std::vector<std::pair<int, int>>& matches, double acquiring_var) const;
+  std::optional<Eigen::Vector2d> CornerWhereEdgesMeet(const PoseEkf& ekf, const Frame& f, int index, int corner) const;
   void ApplyFineMatches(PoseEkf& ekf, Frame& f, const std::vector<std::pair<int, int>>& matches,
                         const std::vector<std::optional<Segment>>& line_matches);
   void UpdateLock(PoseEkf& ekf, Frame& f, const ImageAlignment& alignment, bool acquiring);

@@ -443,6 +443,34 @@ std::vector<double> VisionTracker::Impl::RobustScales(const PoseEkf& ekf, const 
   return scale;
 }
 
+// Where known point `index`'s model edges meet in the keyframe (VisionOptions::corners_on_edges),
+// searched from detected corner `corner`: ideal pixels; nullopt when fewer than two edges are found.
+// An edge's direction is its projection with the filter's pose; edges shorter than 15 px in the
+// image are not searched.
+std::optional<Eigen::Vector2d> VisionTracker::Impl::CornerWhereEdgesMeet(const PoseEkf& ekf, const Frame& f, int index, int corner) const {
+  constexpr int kSamples = 10;
+  const Eigen::Vector3d& p = map.points[index];
+  const std::optional<Eigen::Vector2d> at = ekf.ProjectPoint(k, p);
+  if (!at) return std::nullopt;
+  const Eigen::Vector2d at_frame = ToFrame(*at);
+  std::vector<Eigen::Vector2d> directions;
+  for (const Eigen::Vector3d& edge : point_edges[index]) {
+    const std::optional<Eigen::Vector2d> end = ekf.ProjectPoint(k, p + edge);
+    if (end && (*end - *at).norm() < 3.0 + kSamples + 2) continue;
+    // The direction from a point near the corner (the far end may be behind the camera).
+    const std::optional<Eigen::Vector2d> near = ekf.ProjectPoint(k, p + edge * std::min(1.0, 0.5 / edge.norm()));
+    if (!near || (*near - *at).norm() < 1e-6) continue;
+    const Eigen::Vector2d d = (ToFrame(*at + (*near - *at).normalized() * 5.0) - at_frame).normalized();
+    directions.push_back(d);
+  }
+  if (directions.size() < 2) return std::nullopt;
+  const Eigen::Vector2d seed(f.frame_corners[corner].x, f.frame_corners[corner].y);
+  const std::optional<Eigen::Vector2d> met = CornerOnEdges(f.gray, seed, directions, kSamples, 2.0, 8.0, 3.0);
+  if (!met) return std::nullopt;
+  const std::vector<cv::Point2f> ideal = ToIdeal({cv::Point2f(static_cast<float>(met->x()), static_cast<float>(met->y()))});
+  return Eigen::Vector2d(ideal[0].x, ideal[0].y);
+}
+
 // The fine pass's updates of the filter, points then lines, within the frame's budget; the
 // accepted ones are followed by KLT (points) and edge search (lines) until the next keyframe.
 void VisionTracker::Impl::ApplyFineMatches(PoseEkf& ekf, Frame& f, const std::vector<std::pair<int, int>>& matches,
@@ -457,7 +485,17 @@ void VisionTracker::Impl::ApplyFineMatches(PoseEkf& ekf, Frame& f, const std::ve
   for (size_t m = 0; m < matches.size(); ++m) {
     const auto& [index, j] = matches[m];
     if (map.points[index].z() < ekf.world_from_camera().translation.z()) scale[m] *= options.foot_variance_scale;
-    const Eigen::Vector2d uv(f.corners[j].x, f.corners[j].y);
+    Eigen::Vector2d uv(f.corners[j].x, f.corners[j].y);
+    if (options.corners_on_edges > 0) {
+      const std::optional<Eigen::Vector2d> met = CornerWhereEdgesMeet(ekf, f, index, j);
+      if (met) {
+        uv = *met;
+      } else if (options.corners_on_edges >= 2) {
+        ++f.stats.rejected_structure;
+        continue;
+      }
+    }
+    const Eigen::Vector2d correction = uv - Eigen::Vector2d(f.corners[j].x, f.corners[j].y);
     f.stats.point_matches.emplace_back(map.points[index], uv);
     if (f.budget <= 0) continue;
     --f.budget;
@@ -467,7 +505,7 @@ void VisionTracker::Impl::ApplyFineMatches(PoseEkf& ekf, Frame& f, const std::ve
     const UpdateResult r =
         ekf.UpdatePoint(k, map.points[index], uv, acquiring_var, {{{BiasId(index), PointBiasPx(index, ekf.world_from_camera().translation)}, second}}, scale[m]);
     Count(r, f.stats.points_used, f.stats);
-    if (r.accepted()) known.push_back({index, f.frame_corners[j], f.frame_corners[j], scale[m]});
+    if (r.accepted()) known.push_back({index, f.frame_corners[j], f.frame_corners[j], scale[m], correction});
   }
   known_lines.clear();
   for (size_t i = 0; i < line_matches.size() && f.budget > 0; ++i) {

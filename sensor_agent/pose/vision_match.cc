@@ -5,6 +5,8 @@
 #include <cstdint>
 #include <limits>
 
+#include <Eigen/Dense>
+
 #include <opencv2/imgproc.hpp>
 
 namespace ave::pose::internal {
@@ -190,6 +192,50 @@ std::vector<cv::Point2f> SearchEdge(const cv::Mat& gray, const std::vector<Eigen
     found.emplace_back(static_cast<float>(p.x()), static_cast<float>(p.y()));
   }
   return found;
+}
+
+std::optional<Eigen::Vector2d> CornerOnEdges(const cv::Mat& gray, const Eigen::Vector2d& seed, const std::vector<Eigen::Vector2d>& directions,
+                                             int samples, double reach_px, double min_step, double max_move_px) {
+  struct Edge {
+    Eigen::Vector2d centre, direction;
+  };
+  std::vector<Edge> edges;
+  const double cos_max = std::cos(10.0 * 3.14159265358979323846 / 180);
+  for (const Eigen::Vector2d& d : directions) {
+    std::vector<Eigen::Vector2d> along;
+    for (int i = 0; i < samples; ++i) along.push_back(seed + d * (3.0 + i));
+    const std::vector<cv::Point2f> found = SearchEdge(gray, along, Eigen::Vector2d(-d.y(), d.x()), reach_px, min_step);
+    if (3 * static_cast<int>(found.size()) < 2 * samples) continue;
+    Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+    for (const cv::Point2f& p : found) centre += Eigen::Vector2d(p.x, p.y);
+    centre /= static_cast<double>(found.size());
+    Eigen::Matrix2d scatter = Eigen::Matrix2d::Zero();
+    for (const cv::Point2f& p : found) {
+      const Eigen::Vector2d r = Eigen::Vector2d(p.x, p.y) - centre;
+      scatter += r * r.transpose();
+    }
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(scatter / static_cast<double>(found.size()));
+    const Eigen::Vector2d direction = eig.eigenvectors().col(1);  // the larger eigenvalue's
+    if (!(eig.eigenvalues()(0) <= 0.25) || std::abs(direction.dot(d)) < cos_max) continue;
+    edges.push_back({centre, direction});
+  }
+  // The pair farthest from parallel, at least 20 deg apart (|sin| >= 0.342).
+  double best_sin = 0.342;
+  std::optional<Eigen::Vector2d> corner;
+  for (size_t a = 0; a < edges.size(); ++a) {
+    for (size_t b = a + 1; b < edges.size(); ++b) {
+      const Eigen::Vector2d &ea = edges[a].direction, &eb = edges[b].direction;
+      const double sin_ab = std::abs(ea.x() * eb.y() - ea.y() * eb.x());
+      if (sin_ab < best_sin) continue;
+      Eigen::Matrix2d A;
+      A << ea, -eb;
+      const Eigen::Vector2d st = A.inverse() * (edges[b].centre - edges[a].centre);
+      best_sin = sin_ab;
+      corner = edges[a].centre + ea * st.x();
+    }
+  }
+  if (corner && (*corner - seed).norm() > max_move_px) return std::nullopt;
+  return corner;
 }
 
 CellGrid::CellGrid(int width, int height, int cell_px)

@@ -2,6 +2,7 @@
 // Internal to the vision front end (vision.cc, vision_keyframe.cc, vision_match.cc and their tests): image-side
 // matching helpers. Includes OpenCV; do not include from public headers.
 #include <cmath>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -76,6 +77,18 @@ std::vector<std::pair<int, int>> MatchPoints(const std::vector<std::pair<int, Ei
 // skipped. Model-based edge tracking in the manner of RAPiD / moving edges.
 std::vector<cv::Point2f> SearchEdge(const cv::Mat& gray, const std::vector<Eigen::Vector2d>& samples, const Eigen::Vector2d& normal,
                                     double reach_px, double min_step);
+
+// A model corner located where its edges meet in the frame (issue 19, thirteenth session), instead
+// of where a gradient corner detector puts it (inside the wedge of a blurred corner, up to 1.5 px at
+// a gable's apex). `directions` are the corner's model edges as the pose projects them (unit, frame
+// pixels, pointing away from the corner). Along each, edge points are searched across the edge
+// (SearchEdge, within reach_px) at 3..(3 + samples) px from `seed`; the edge counts when at least
+// two thirds of its samples step, a line fits them within 0.5 px RMS and it runs within 10 deg of
+// the prediction. The two counted edges farthest from parallel (at least 20 deg apart) are
+// intersected. nullopt when fewer than two edges count or the meeting point is more than
+// `max_move_px` from the seed.
+std::optional<Eigen::Vector2d> CornerOnEdges(const cv::Mat& gray, const Eigen::Vector2d& seed, const std::vector<Eigen::Vector2d>& directions,
+                                             int samples, double reach_px, double min_step, double max_move_px);
 
 // A coarse occupancy grid over the image (cells of `cell_px`), to detect new corners only where
 // the tracked set is thin.

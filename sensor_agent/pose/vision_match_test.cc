@@ -1,9 +1,14 @@
-// The coarse pass's image alignment (vision_match.h): offset and turn about the principal point.
+// The coarse pass's image alignment (vision_match.h): offset and turn about the principal point;
+// corners located where their model edges meet.
 #include <cmath>
+#include <optional>
 #include <vector>
+
+#include <Eigen/Geometry>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
+#include <opencv2/video/tracking.hpp>
 
 #include "sensor_agent/pose/vision_match.h"
 
@@ -103,6 +108,69 @@ TEST(ChamferAlign, DegenerateInputsGiveTheIdentity) {
     // Two samples are nothing to score: never a good fit (a relocalisation candidate must not win by it).
     EXPECT_EQ(std::isinf(a.score_px), samples.size() < 10);
   }
+}
+
+// A gable's apex as a far camera sees it: a dark roof (apex angle 80 deg) against a bright sky,
+// each pixel's grey the share of its area (8x8 samples; pixel centres at integer coordinates, as
+// OpenCV's corner functions and SearchEdge read them) under the roof, then blurred (sigma 1 px: a
+// lens and a resampled frame). `apex` is where the sides meet; the unit directions of its two sides
+// point away from it.
+cv::Mat Gable(const Eigen::Vector2d& apex, std::vector<Eigen::Vector2d>& sides) {
+  const double half = 40.0 * kPi / 180;
+  sides = {Eigen::Vector2d(-std::sin(half), std::cos(half)), Eigen::Vector2d(std::sin(half), std::cos(half))};
+  cv::Mat grey(160, 160, CV_32F);
+  for (int y = 0; y < grey.rows; ++y) {
+    for (int x = 0; x < grey.cols; ++x) {
+      int under = 0;
+      for (int i = 0; i < 64; ++i) {
+        const Eigen::Vector2d r = Eigen::Vector2d(x + (i % 8 + 0.5) / 8 - 0.5, y + (i / 8 + 0.5) / 8 - 0.5) - apex;
+        // Below both sides: on the inner side of each (the side's normal pointing into the roof).
+        under += (sides[0].x() * r.y() - sides[0].y() * r.x()) <= 0 && (sides[1].x() * r.y() - sides[1].y() * r.x()) >= 0;
+      }
+      grey.at<float>(y, x) = static_cast<float>(210 - 140 * under / 64.0);
+    }
+  }
+  cv::GaussianBlur(grey, grey, cv::Size(0, 0), 1.0);
+  cv::Mat gray;
+  grey.convertTo(gray, CV_8U);
+  return gray;
+}
+
+TEST(CornerOnEdges, FindsABlurredApexWhereTheCornerDetectorDoesNot) {
+  const Eigen::Vector2d apex(80.3, 50.6);
+  std::vector<Eigen::Vector2d> sides;
+  const cv::Mat gray = Gable(apex, sides);
+  // The detector's corner, as the keyframe finds it: off the apex, inside the roof's wedge.
+  std::vector<cv::Point2f> detected;
+  cv::goodFeaturesToTrack(gray, detected, 1, 0.005, 3);
+  ASSERT_EQ(detected.size(), 1u);
+  cv::cornerSubPix(gray, detected, cv::Size(4, 4), cv::Size(-1, -1), cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 20, 0.03));
+  const Eigen::Vector2d seed(detected[0].x, detected[0].y);
+  EXPECT_GT(seed.y() - apex.y(), 0.2) << "the premise: a gradient corner sits inside a blurred wedge, at " << seed.transpose();
+
+  const std::optional<Eigen::Vector2d> met = CornerOnEdges(gray, seed, sides, 10, 2.0, 8.0, 3.0);
+  ASSERT_TRUE(met.has_value());
+  EXPECT_LT((*met - apex).norm(), 0.1) << "found at " << met->transpose() << ", detected at " << seed.transpose();
+  // From a seed 2 px off along an edge, and with a third model edge that the frame does not show
+  // (hidden behind the roof), the same place.
+  const std::vector<Eigen::Vector2d> with_hidden = {sides[0], Eigen::Vector2d(0, -1), sides[1]};
+  const std::optional<Eigen::Vector2d> again = CornerOnEdges(gray, apex + sides[0] * 2.0, with_hidden, 10, 2.0, 8.0, 3.0);
+  ASSERT_TRUE(again.has_value());
+  EXPECT_LT((*again - apex).norm(), 0.1);
+}
+
+// Where the model's edges are not in the frame, nothing is found: a blank frame, a single edge, two
+// nearly parallel edges, a seed off the image, and a meeting point beyond max_move_px.
+TEST(CornerOnEdges, NothingWhereTheEdgesAreNotFound) {
+  const Eigen::Vector2d apex(80.3, 50.6);
+  std::vector<Eigen::Vector2d> sides;
+  const cv::Mat gray = Gable(apex, sides);
+  EXPECT_FALSE(CornerOnEdges(cv::Mat(160, 160, CV_8U, cv::Scalar(128)), apex, sides, 10, 2.0, 8.0, 3.0));
+  EXPECT_FALSE(CornerOnEdges(gray, apex, {sides[0]}, 10, 2.0, 8.0, 3.0));
+  const Eigen::Vector2d tilted = Eigen::Rotation2Dd(0.1) * sides[0];  // 6 deg from the first side
+  EXPECT_FALSE(CornerOnEdges(gray, apex, {sides[0], tilted}, 10, 2.0, 8.0, 3.0));
+  EXPECT_FALSE(CornerOnEdges(gray, Eigen::Vector2d(-1e6, 1e6), sides, 10, 2.0, 8.0, 3.0));
+  EXPECT_FALSE(CornerOnEdges(gray, apex + sides[0] * 1.5, sides, 10, 2.0, 8.0, 1.0));
 }
 
 }  // namespace

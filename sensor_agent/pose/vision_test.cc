@@ -396,6 +396,36 @@ TEST_F(VisionTest, WallFeetWeighLessThanWallTops) {
   EXPECT_LT((p_1b - p_1).norm(), 1e-12);
 }
 
+// ... and along their KLT tracks between keyframes (issue 19, thirteenth session: the track's copy
+// dropped the keyframe match's variance scale, so on every tracked frame a foot weighed as much as
+// a top). The same frame twice, the second tracked: with feet at 4x the variance the tracked frame
+// shrinks the position covariance less than at 1x.
+TEST_F(VisionTest, WallFeetWeighLessAlongTheirTracksToo) {
+  const scene::CameraSpec& camera = *scenario_->world.FindCamera("backpack");
+  const auto [frame, truth] = BackpackAt4s();
+  const Rigid3d start = Off(truth, {0.05, -0.05, 0.02}, {0.05, -0.1, 0.05});
+  auto tracked_shrink = [&](double foot_scale) {
+    VisionOptions options;
+    options.foot_variance_scale = foot_scale;
+    options.lock_frames = 1;  // tracked from the second frame on
+    VisionTracker vision = CampusTracker(camera.intrinsics, options);
+    PoseEkf ekf;
+    ekf.Initialize(0, start, 0.3, 1 * kDeg);
+    const VisionFrameStats key = vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
+    EXPECT_TRUE(key.keyframe);
+    const double before = ekf.covariance().block<3, 3>(kPos, kPos).trace();
+    const VisionFrameStats tracked = vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
+    EXPECT_FALSE(tracked.keyframe);
+    int feet = 0;
+    for (const auto& [p, uv] : tracked.point_matches) feet += p.z() < truth.translation.z();
+    EXPECT_GE(feet, 3) << "the tracked frame follows wall feet";
+    return (before - ekf.covariance().block<3, 3>(kPos, kPos).trace()) / before;
+  };
+  const double shrink_1 = tracked_shrink(1.0), shrink_4 = tracked_shrink(4.0);
+  EXPECT_GT(shrink_1, 0.0);
+  EXPECT_LT(shrink_4, 0.9 * shrink_1) << "shrink at 1x " << shrink_1 << ", at 4x " << shrink_4;
+}
+
 // Issue 19, tenth session: a frame whose left half a near object covers fits nowhere as a whole,
 // but its right half does. Once the lock has held (local_fit_after_lock_s), the right half's
 // features still correct the pose and none is taken from the covered half; judged as a whole

@@ -105,6 +105,7 @@ struct PoseBenchOptions {
   double feature_shared_bias_px = pose::VisionOptions{}.feature_shared_bias_px;
   double feature_class_bias_px = pose::VisionOptions{}.feature_class_bias_px;  // issue 19, ninth session
   double foot_variance_scale = pose::VisionOptions{}.foot_variance_scale;      // issue 19, tenth session
+  int corners_on_edges = pose::VisionOptions{}.corners_on_edges;              // issue 19, thirteenth session
   double local_fit_px = pose::VisionOptions{}.local_fit_px;                    // issue 19, tenth session
   double robust_residual_px = pose::VisionOptions{}.robust_residual_px;
   double gyro_bias_sigma_rad_s = pose::PoseFilterOptions{}.gyro_bias_sigma_rad_s;
@@ -162,7 +163,7 @@ struct Row {
   int matches_beyond_3px = 0;
   std::array<double, pose::kVisionStageCount> stage_ms{};
   int keyframes = 0, weak_locks = 0, relocks = 0, unfit = 0, relocalized = 0, relocalize_waiting = 0;
-  int64_t rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0, klt_lost = 0, unknown_dropped = 0, rejected_tracked_jump = 0;
+  int64_t rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0, klt_lost = 0, unknown_dropped = 0, rejected_tracked_jump = 0, rejected_structure = 0;
   int nees_frames = 0, nees_in_band = 0, nees_below = 0, nees_above = 0;
   // Unknown features joining the state (joint mode), against the static mesh's point on the true
   // ray through the same pixel: 3D error (m) and 3-dof NEES of their estimate.
@@ -566,6 +567,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.feature_shared_bias_px = o.feature_shared_bias_px;
     vo.feature_class_bias_px = o.feature_class_bias_px;
     vo.foot_variance_scale = o.foot_variance_scale;
+    vo.corners_on_edges = o.corners_on_edges;
     vo.local_fit_px = o.local_fit_px;
     vo.robust_residual_px = o.robust_residual_px;
     vo.use_lines = o.lines;
@@ -608,6 +610,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
         row.relocalize_waiting += s.relocalize_waiting;
         row.relocks += s.relocks;
         row.rejected_tracked_jump += s.rejected_tracked_jump;
+        row.rejected_structure += s.rejected_structure;
         row.rejected_gate += s.rejected_gate, row.rejected_behind += s.rejected_behind, row.rejected_not_finite += s.rejected_not_finite;
         row.klt_lost += s.klt_lost, row.unknown_dropped += s.unknown_dropped;
         row.landmarks_in_state += s.landmarks_in_state;
@@ -806,12 +809,12 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     for (const Row* r : staged) std::printf(" **%.2f** |", r->TotalMs());
     std::printf("\n");
   }
-  std::printf("\nrejections over the run (features not applied, by reason):\n| mode | outside the gate | tracked, off the prediction | behind the camera | not finite | KLT lost | unknown features dropped (gate) | weak-lock keyframes | declared lost | keyframes the model fits nowhere | relocalised | waiting for a fit |\n");
-  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+  std::printf("\nrejections over the run (features not applied, by reason):\n| mode | outside the gate | tracked, off the prediction | corner's edges not found | behind the camera | not finite | KLT lost | unknown features dropped (gate) | weak-lock keyframes | declared lost | keyframes the model fits nowhere | relocalised | waiting for a fit |\n");
+  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
   for (const Row& r : rows) {
     if (r.features == 0 || r.mode != "gps-imu-vision") continue;
-    std::printf("| %s | %lld | %lld | %lld | %lld | %lld | %lld | %d | %d | %d | %d | %d |\n", RowName(r).c_str(), static_cast<long long>(r.rejected_gate),
-                static_cast<long long>(r.rejected_tracked_jump),
+    std::printf("| %s | %lld | %lld | %lld | %lld | %lld | %lld | %lld | %d | %d | %d | %d | %d |\n", RowName(r).c_str(), static_cast<long long>(r.rejected_gate),
+                static_cast<long long>(r.rejected_tracked_jump), static_cast<long long>(r.rejected_structure),
                 static_cast<long long>(r.rejected_behind), static_cast<long long>(r.rejected_not_finite), static_cast<long long>(r.klt_lost),
                 static_cast<long long>(r.unknown_dropped), r.weak_locks, r.relocks, r.unfit, r.relocalized, r.relocalize_waiting);
   }
@@ -1147,6 +1150,10 @@ Runner AddPoseBench(CLI::App& sub) {
                  "on a keyframe that fits nowhere as a whole, features whose own outline lies within this mean edge distance are still matched (0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 8.0));
+  sub.add_option("--corners-on-edges", o->corners_on_edges,
+                 "known corners measured where their model edges meet (issue 19, thirteenth session): 0 as detected, 1 moved where found, 2 also refused where not")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0, 2));
   sub.add_option("--foot-variance-scale", o->foot_variance_scale,
                  "a wall foot's match (known point below the camera) gets this many times a wall top's pixel variance (issue 19, tenth session; 1: same)")
       ->capture_default_str()
