@@ -1,6 +1,7 @@
 // The coarse pass's image alignment (vision_match.h): offset and turn about the principal point;
 // corners located where their model edges meet.
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <vector>
 
@@ -160,7 +161,8 @@ TEST(CornerOnEdges, FindsABlurredApexWhereTheCornerDetectorDoesNot) {
 }
 
 // Where the model's edges are not in the frame, nothing is found: a blank frame, a single edge, two
-// nearly parallel edges, a seed off the image, and a meeting point beyond max_move_px.
+// nearly parallel edges, a seed off the image or not a number, directions not a number or zero, and
+// a meeting point beyond max_move_px.
 TEST(CornerOnEdges, NothingWhereTheEdgesAreNotFound) {
   const Eigen::Vector2d apex(80.3, 50.6);
   std::vector<Eigen::Vector2d> sides;
@@ -170,6 +172,9 @@ TEST(CornerOnEdges, NothingWhereTheEdgesAreNotFound) {
   const Eigen::Vector2d tilted = Eigen::Rotation2Dd(0.1) * sides[0];  // 6 deg from the first side
   EXPECT_FALSE(CornerOnEdges(gray, apex, {sides[0], tilted}, 10, 2.0, 8.0, 3.0));
   EXPECT_FALSE(CornerOnEdges(gray, Eigen::Vector2d(-1e6, 1e6), sides, 10, 2.0, 8.0, 3.0));
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(CornerOnEdges(gray, Eigen::Vector2d(nan, nan), sides, 10, 2.0, 8.0, 3.0));
+  EXPECT_FALSE(CornerOnEdges(gray, apex, {Eigen::Vector2d(nan, 0), Eigen::Vector2d::Zero()}, 10, 2.0, 8.0, 3.0));
   EXPECT_FALSE(CornerOnEdges(gray, apex + sides[0] * 1.5, sides, 10, 2.0, 8.0, 1.0));
 }
 
