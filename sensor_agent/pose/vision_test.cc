@@ -743,6 +743,7 @@ TEST(VisionOptions, CheckNamesTheBadField) {
       {"robust_residual_px", [inf](VisionOptions& o) { o.robust_residual_px = inf; }},
       {"feature_class_bias_px", [nan](VisionOptions& o) { o.feature_class_bias_px = nan; }},
       {"foot_variance_scale", [](VisionOptions& o) { o.foot_variance_scale = 0.5; }},
+      {"corners_on_edges", [](VisionOptions& o) { o.corners_on_edges = 3; }},
       {"local_fit_px", [](VisionOptions& o) { o.local_fit_px = -1; }},
       {"local_fit_after_lock_s", [nan](VisionOptions& o) { o.local_fit_after_lock_s = nan; }},
       {"tracked_max_innovation_px", [](VisionOptions& o) { o.tracked_max_innovation_px = -1; }},
