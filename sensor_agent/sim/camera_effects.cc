@@ -200,8 +200,58 @@ struct SimulatedCamera::Impl {
   cv::Mat map_x, map_y;
   std::vector<int64_t> nearest;
   std::vector<uint8_t> read;  // per ideal pixel: 1 where the resampling reads it (shade_only_read_pixels)
+  // pixel_area: samples per axis (1: off); the render is made with fine_intrinsics and fine_read
+  // (render_intrinsics and read, `area` times finer) and averaged down to render_intrinsics.
+  int area = 1;
+  PinholeIntrinsics fine_intrinsics;
+  std::vector<uint8_t> fine_read;
   mutable std::vector<StageTime> timings;
 };
+
+namespace {
+
+// render_intrinsics `s` times finer: fine pixel U's centre lies at coarse (U + 0.5) / s - 0.5, so
+// the s x s fine pixels of coarse pixel u tile its area exactly.
+PinholeIntrinsics FinerIntrinsics(const PinholeIntrinsics& k, int s) {
+  PinholeIntrinsics f = k;
+  f.width = k.width * s;
+  f.height = k.height * s;
+  f.fx = k.fx * s;
+  f.fy = k.fy * s;
+  f.cx = s * (k.cx + 0.5) - 0.5;
+  f.cy = s * (k.cy + 0.5) - 0.5;
+  return f;
+}
+
+}  // namespace
+
+// The pixel_area effect: each of the width x height pixels is the mean of its s x s fine samples
+// (cv::resize INTER_AREA, an exact box average at an integer factor); the truth layers (ids,
+// classes, depths) are those of the centre sample (for an even s, the one just below and right of
+// the centre, 0.5 / s px off).
+SimImage AveragePixelArea(const SimImage& fine, int s, int width, int height) {
+  CountEvaluation(EffectKind::kPixelArea);
+  SimImage out;
+  out.width = width;
+  out.height = height;
+  const size_t n = static_cast<size_t>(width) * height;
+  out.bgr.resize(3 * n);
+  const cv::Mat src(fine.height, fine.width, CV_8UC3, const_cast<uint8_t*>(fine.bgr.data()));
+  cv::Mat dst(height, width, CV_8UC3, out.bgr.data());
+  cv::resize(src, dst, dst.size(), 0, 0, cv::INTER_AREA);
+  out.object_id.resize(n);
+  out.class_id.resize(n);
+  out.depth_m.resize(n);
+  for (int v = 0; v < height; ++v) {
+    for (int u = 0; u < width; ++u) {
+      const size_t i = out.Index(u, v), c = fine.Index(u * s + s / 2, v * s + s / 2);
+      out.object_id[i] = fine.object_id[c];
+      out.class_id[i] = fine.class_id[c];
+      out.depth_m[i] = fine.depth_m[c];
+    }
+  }
+  return out;
+}
 
 SimulatedCamera::SimulatedCamera(const scene::SyntheticCampus& campus, const scene::CameraSpec& camera, const EffectSet& effects,
                                  uint64_t seed, RendererOptions renderer_options)
@@ -290,6 +340,21 @@ SimulatedCamera::SimulatedCamera(const scene::SyntheticCampus& campus, const sce
       if (!all_finite) impl_->read.clear();  // shade everything
     }
   }
+  if (const EffectParams* p = effects.Find(EffectKind::kPixelArea)) {
+    Impl& m = *impl_;
+    m.area = std::clamp(static_cast<int>(std::lround(p->Get("samples", 3))), 1, kMaxPixelAreaSamples);
+    m.fine_intrinsics = FinerIntrinsics(m.render_intrinsics, m.area);
+    if (!m.read.empty()) {
+      const int w = m.render_intrinsics.width, s = m.area;
+      m.fine_read.assign(m.read.size() * s * s, 0);
+      for (size_t i = 0; i < m.read.size(); ++i) {
+        if (!m.read[i]) continue;
+        const int u = static_cast<int>(i % w), v = static_cast<int>(i / w);
+        for (int dv = 0; dv < s; ++dv)
+          for (int du = 0; du < s; ++du) m.fine_read[static_cast<size_t>(v * s + dv) * m.fine_intrinsics.width + u * s + du] = 1;
+      }
+    }
+  }
 }
 
 SimulatedCamera::SimulatedCamera(SimulatedCamera&&) noexcept = default;
@@ -310,7 +375,10 @@ SimImage SimulatedCamera::Frame(int64_t frame_index, double t_s) const {
     clock = now;
   };
   CampusRenderer::Stats stats;
-  SimImage image = m.renderer->Render(m.render_intrinsics, PoseAt(t_s), t_s, &stats, m.read.empty() ? nullptr : &m.read);
+  const bool fine = m.area > 1;
+  const std::vector<uint8_t>& read = fine ? m.fine_read : m.read;
+  SimImage image = m.renderer->Render(fine ? m.fine_intrinsics : m.render_intrinsics, PoseAt(t_s), t_s, &stats,
+                                      read.empty() ? nullptr : &read);
   lap("render");
   if (m.effects.Has(EffectKind::kWavingVegetation)) {
     // Renderer side: reported apart from the render it happened inside.
@@ -318,6 +386,10 @@ SimImage SimulatedCamera::Frame(int64_t frame_index, double t_s) const {
     m.timings.push_back({"waving_vegetation", stats.waving_vegetation_s});
   }
   if (image.width == 0) return image;
+  if (fine) {
+    image = AveragePixelArea(image, m.area, m.render_intrinsics.width, m.render_intrinsics.height);
+    lap("pixel_area");
+  }
   const uint64_t frame_seed = FrameSeed(m.seed, frame_index);
   if (m.distorted) {
     const PinholeIntrinsics& k = m.camera.intrinsics;

@@ -11,9 +11,13 @@
 //                       width_frac (0.2)                         sweeps left to right for duration_s every period_s
 //   waving_vegetation   amplitude_m (0.3), frequency_hz (0.4),   tree crowns sway with time (renderer side: the
 //                       wind_deg (30)                            crown geometry moves, masks follow)
+//   pixel_area          samples (3, per axis, 1..5)              each pixel integrates the light over its area: the
+//                                                                 render is samples x samples finer and box-averaged
+//                                                                 down (cv::resize INTER_AREA); ids, classes and
+//                                                                 depths are the centre sample's (renderer side)
 //
 // SimulatedCamera is the camera pipeline: render (sim_camera.h, with waving_vegetation inside)
-// -> lens distortion (a camera property, not an effect: the ideal render is warped by the
+// -> pixel_area -> lens distortion (a camera property, not an effect: the ideal render is warped by the
 // intrinsics' Brown-Conrady coefficients, masks by nearest neighbour) -> rolling_occlusion ->
 // illumination -> camera_noise -> jpeg_artefacts. Frame k's random numbers come from (seed, k) only, so a frame is the same
 // whenever it is rendered. With no effects and no distortion a frame is exactly the render.
@@ -36,6 +40,9 @@ void ApplyCameraNoise(const EffectParams& params, uint64_t frame_seed, SimImage&
 void ApplyIllumination(const EffectParams& params, uint64_t seed, double t_s, SimImage& image);
 void ApplyJpegArtefacts(const EffectParams& params, SimImage& image);
 void ApplyRollingOcclusion(const EffectParams& params, uint64_t seed, double t_s, SimImage& image);
+// pixel_area: `fine` rendered `samples` times finer on each axis (width * samples wide) -> the
+// width x height image whose pixels are the means of their samples x samples fine pixels.
+SimImage AveragePixelArea(const SimImage& fine, int samples, int width, int height);
 
 // A tree crown's vertices in a renderer's vertex array.
 struct SwayingCrown {

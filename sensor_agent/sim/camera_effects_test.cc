@@ -303,6 +303,62 @@ TEST(CameraPipeline, ShadingOnlyThePixelsTheLensReadsIsBitIdentical) {
   }
 }
 
+// Issue 19: pixel_area. Each pixel is the mean of its 3 x 3 fine samples: the truth layers are
+// the centre sample's, which is the one-sample render's pixel centre (so they agree but for ties
+// on an exact edge), and every pixel's colour is a blend of what its area shows: within the range
+// of the one-sample render's 3 x 3 neighbourhood wherever the 1-px neighbourhood covers the area.
+// The lens's read mask grows with the fine grid: shading only what is read changes no bit.
+TEST(CameraPipeline, PixelAreaBlendsEdgesAndKeepsTheCentreTruth) {
+  const Scenario campus = Load("campus");
+  const scene::CameraSpec& backpack = *campus.world.FindCamera("backpack");
+  EffectSet area;
+  area.Enable(EffectKind::kPixelArea, EffectParams{{{"samples", 3}}});
+  const SimulatedCamera one(campus.world, backpack, EffectSet{}, campus.seed), three(campus.world, backpack, area, campus.seed);
+  RendererOptions all;
+  all.shade_only_read_pixels = false;
+  const SimulatedCamera three_full(campus.world, backpack, area, campus.seed, all);
+  ResetEvaluations();
+  const SimImage a = one.Frame(15, 0.5), b = three.Frame(15, 0.5), c = three_full.Frame(15, 0.5);
+  EXPECT_EQ(Evaluations(EffectKind::kPixelArea), 2u);
+  ASSERT_EQ(a.width, b.width);
+  ASSERT_EQ(a.height, b.height);
+  EXPECT_EQ(b.bgr, c.bgr);
+  EXPECT_EQ(b.object_id, c.object_id);
+  const int w = a.width, h = a.height;
+  size_t same_id = 0, edges = 0, blended = 0, inside = 0, checked = 0;
+  for (int v = 1; v + 1 < h; ++v) {
+    for (int u = 1; u + 1 < w; ++u) {
+      const size_t i = a.Index(u, v);
+      same_id += a.object_id[i] == b.object_id[i] && a.class_id[i] == b.class_id[i];
+      bool edge = false;
+      for (int dv = -1; dv <= 1; ++dv)
+        for (int du = -1; du <= 1; ++du) edge |= a.object_id[a.Index(u + du, v + dv)] != a.object_id[i];
+      if (!edge) continue;
+      ++edges;
+      bool in_range = true, differs = false;
+      for (int ch = 0; ch < 3; ++ch) {
+        int lo = 255, hi = 0;
+        for (int dv = -1; dv <= 1; ++dv)
+          for (int du = -1; du <= 1; ++du) {
+            lo = std::min<int>(lo, a.bgr[3 * a.Index(u + du, v + dv) + ch]);
+            hi = std::max<int>(hi, a.bgr[3 * a.Index(u + du, v + dv) + ch]);
+          }
+        const int x = b.bgr[3 * i + ch];
+        in_range &= x >= lo - 12 && x <= hi + 12;  // the fine samples' own texture and shading
+        differs |= std::abs(x - a.bgr[3 * i + ch]) > 8;
+      }
+      ++checked;
+      inside += in_range;
+      blended += differs;
+    }
+  }
+  const size_t n = static_cast<size_t>(w - 2) * (h - 2);
+  EXPECT_GT(same_id, n * 9995 / 10000) << "the truth layers are the pixel centre's";
+  ASSERT_GT(edges, 1000u);
+  EXPECT_GT(inside, checked * 97 / 100) << "an edge pixel blends what its neighbourhood shows";
+  EXPECT_GT(blended, edges / 5) << "edge pixels are not the one-sample render's";
+}
+
 // Example frames with every campus effect, for people to look at (AVE_SIM_PNG_DIR).
 TEST(CameraPipeline, WritesExampleFrames) {
   const char* env = std::getenv("AVE_SIM_PNG_DIR");

@@ -6,7 +6,8 @@ namespace {
 constexpr const char* kNames[kEffectCount] = {
     "gps_noise",         "gps_multipath",      "gps_dropout",           "imu_noise",
     "gyro_drift",        "magnetic_disturbance", "camera_noise",        "illumination",
-    "jpeg_artefacts",    "rolling_occlusion",  "waving_vegetation",     "lidar_range_noise",
+    "jpeg_artefacts",    "rolling_occlusion",  "waving_vegetation",     "pixel_area",
+    "lidar_range_noise",
     "lidar_ring_pattern", "lidar_missing_returns", "lidar_intensity_by_material",
 };
 

@@ -28,6 +28,7 @@ enum class EffectKind : int {
   kJpegArtefacts,
   kRollingOcclusion,
   kWavingVegetation,  // images and LiDAR
+  kPixelArea,         // camera: each pixel integrates its area (renderer side)
   // LiDAR
   kLidarRangeNoise,
   kLidarRingPattern,
@@ -37,6 +38,8 @@ enum class EffectKind : int {
 };
 
 inline constexpr int kEffectCount = static_cast<int>(EffectKind::kCount);
+// pixel_area's `samples` (per image axis) ranges over 1..kMaxPixelAreaSamples.
+inline constexpr int kMaxPixelAreaSamples = 5;
 
 // Scenario names: "gps_noise", "gps_multipath", ... (snake case of the enumerator).
 const char* EffectName(EffectKind kind);

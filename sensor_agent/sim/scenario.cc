@@ -1,6 +1,7 @@
 #include "sensor_agent/sim/scenario.h"
 
 #include <algorithm>
+#include <cmath>
 #include <set>
 
 #include "absl/status/status.h"
@@ -67,6 +68,8 @@ void ParseEffects(const YAML::Node& list, Scenario& s) {
       const YAML::Node where = entry.IsMap() ? entry["params"][key] : entry;
       if (positive && !(value > 0)) Fail(where, field + ".params." + key, "must be > 0");
       if (!positive && key != "wind_deg" && key != "start_s" && value < 0) Fail(where, field + ".params." + key, "must be >= 0");
+      if (*kind == EffectKind::kPixelArea && key == "samples" && !(value == std::floor(value) && value >= 1 && value <= kMaxPixelAreaSamples))
+        Fail(where, field + ".params." + key, "must be a whole number of samples per axis from 1 to " + std::to_string(kMaxPixelAreaSamples));
     }
     s.effects.Enable(*kind, params);
     if (!cameras.empty()) s.effect_cameras[*kind] = cameras;
@@ -163,6 +166,7 @@ std::vector<std::string> KnownEffectParams(EffectKind kind) {
     case EffectKind::kJpegArtefacts: return {"quality"};
     case EffectKind::kRollingOcclusion: return {"period_s", "duration_s", "width_frac", "start_s"};
     case EffectKind::kWavingVegetation: return {"amplitude_m", "frequency_hz", "wind_deg"};
+    case EffectKind::kPixelArea: return {"samples"};
     default: return {};  // GPS, IMU and LiDAR effects: their parameters are the sensor simulators' (docs/SIMULATOR_FORMATS.md)
   }
 }

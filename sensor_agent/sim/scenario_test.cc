@@ -74,6 +74,10 @@ TEST(ScenarioBadInput, TypoedEffectParameterSuggestsTheRightOne) {
               StartsWith("bad.yaml:4: effects[1].name: effect 'camera_noise' is named twice"));
   EXPECT_THAT(Rejection("name: t\neffects:\n  - {name: camera_noise, params: {sigma: -1}}\n"),
               StartsWith("bad.yaml:3: effects[0].params.sigma: must be > 0"));
+  for (const char* samples : {"2.5", "0", "6"})
+    EXPECT_THAT(Rejection(std::string("name: t\neffects:\n  - {name: pixel_area, params: {samples: ") + samples + "}}\n"),
+                StartsWith("bad.yaml:3: effects[0].params.samples: must be a whole number of samples per axis from 1 to 5"))
+        << samples;
 }
 
 TEST(ScenarioBadInput, NegativeSensorRatesAreRejected) {

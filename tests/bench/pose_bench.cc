@@ -116,6 +116,9 @@ struct PoseBenchOptions {
   // > 0: every frame JPEG-encoded at this quality and decoded before the pose sees it, as the
   // agent's pre-rendered footage delivers frames (issue 19, session rate19); 0: the render as is.
   int footage_jpeg_quality = 0;
+  // >= 1: the pixel_area effect with this many samples per axis whatever the scenario names (1:
+  // one sample at each pixel's centre); 0: as the scenario names it.
+  int pixel_area = 0;
   std::string match_csv;     // every known-point match of every frame against its true projection (issue 19, seventh session)
   std::string landmark_csv;  // every unknown feature that joined the state, with what it sits on (issue 19, session pose19j)
 };
@@ -386,7 +389,9 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
   const pose::SensorLog log = pose::FromSimulation(sim::SimulateGpsImu(world, *camera, spec, scenario->effects, scenario->seed));
 
   // Frames at the 30 Hz video rate (AVE §5), rendered once and shared by every mode.
-  const sim::SimulatedCamera sim_camera(world, *camera, scenario->EffectsForCamera(o.camera), scenario->seed);
+  sim::EffectSet camera_effects = scenario->EffectsForCamera(o.camera);
+  if (o.pixel_area >= 1) camera_effects.Enable(sim::EffectKind::kPixelArea, sim::EffectParams{{{"samples", double(o.pixel_area)}}});
+  const sim::SimulatedCamera sim_camera(world, *camera, camera_effects, scenario->seed);
   const int n = static_cast<int>(std::floor(o.seconds * 30 + 1e-9)) + 1;
   std::vector<sim::SimImage> frames;
   std::vector<Rigid3d> truth;
@@ -1248,6 +1253,9 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--footage-jpeg-quality", o->footage_jpeg_quality,
                  "JPEG-encode and decode every frame at this quality first, as ave-sim footage delivers them (0: off)")
       ->capture_default_str()->check(ave::cli::Range(0, 100));
+  sub.add_option("--pixel-area", o->pixel_area,
+                 "render each pixel as the mean of this many samples per axis (the pixel_area effect; 1: one sample at its centre; 0: as the scenario names it)")
+      ->capture_default_str()->check(ave::cli::Range(0, sim::kMaxPixelAreaSamples));
   sub.add_option("--match-csv", o->match_csv, "write every known-point match of every row and frame with its true projection to this CSV")
       ->check(ave::cli::WritableFile());
   sub.add_option("--landmark-csv", o->landmark_csv, "write every unknown feature that joins the state (joint rows), with what it sits on, to this CSV")
