@@ -55,6 +55,8 @@ std::string VisionOptions::Check() const {
   if (!(robust_residual_px >= 0 && std::isfinite(robust_residual_px))) return "robust_residual_px must be finite and >= 0";
   if (!(feature_class_bias_px >= 0 && std::isfinite(feature_class_bias_px))) return "feature_class_bias_px must be finite and >= 0";
   if (corners_on_edges < 0 || corners_on_edges > 2) return "corners_on_edges must be 0, 1 or 2";
+  if (corner_window_px < 1 || corner_window_px > 8) return "corner_window_px must be 1 to 8";
+  if (!(corner_bias_px >= 0 && corner_bias_px <= 3)) return "corner_bias_px must be 0 to 3";
   if (!(foot_variance_scale >= 1 && std::isfinite(foot_variance_scale))) return "foot_variance_scale must be finite and >= 1";
   if (!(local_fit_px >= 0 && std::isfinite(local_fit_px)) || !(local_fit_after_lock_s >= 0 && std::isfinite(local_fit_after_lock_s)))
     return "local_fit_px and local_fit_after_lock_s must be finite and >= 0";
@@ -430,7 +432,7 @@ void VisionTracker::Impl::RefineTrackedKnown(Frame& f) {
   std::vector<cv::Point2f> raw;
   for (const KnownTrack& t : known) raw.push_back(t.px);
   if (options.refine_tracked_corners && !raw.empty()) {
-    cv::cornerSubPix(f.gray, raw, cv::Size(4, 4), cv::Size(-1, -1), cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 10, 0.03));
+    cv::cornerSubPix(f.gray, raw, cv::Size(options.corner_window_px, options.corner_window_px), cv::Size(-1, -1), cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 10, 0.03));
     for (size_t i = 0; i < raw.size(); ++i) known[i].px = raw[i];
   }
   const std::vector<cv::Point2f> ideal = ToIdeal(raw);
@@ -651,7 +653,7 @@ void VisionTracker::Impl::DetectThinCorners(Frame& f, const CellGrid& grid) cons
     cv::goodFeaturesToTrack(level, f.frame_corners, options.max_new_points - static_cast<int>(tracks.size()), 0.01, 10.0 / scale, mask);
     for (cv::Point2f& p : f.frame_corners) p *= static_cast<float>(scale);
     if (!f.frame_corners.empty()) {
-      cv::cornerSubPix(f.gray, f.frame_corners, cv::Size(4, 4), cv::Size(-1, -1),
+      cv::cornerSubPix(f.gray, f.frame_corners, cv::Size(options.corner_window_px, options.corner_window_px), cv::Size(-1, -1),
                        cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 10, 0.05));
     }
     f.corners = ToIdeal(f.frame_corners);

@@ -279,6 +279,9 @@ struct VisionTracker::Impl {
   PoseEkf CoarsePass(const PoseEkf& ekf, Frame& f, const ImageAlignment& alignment, bool turn);
   void FinePass(PoseEkf& ekf, Frame& f, const PoseEkf& coarse, const std::vector<Segment>& segments);
   std::vector<double> RobustScales(const PoseEkf& ekf, const Frame& f, const std::vector<std::pair<int, int>>& matches, double acquiring_var) const;
+  // The unit direction into known point `index`'s wedge in ideal pixels (the sum of its model
+  // edges' projected directions); nullopt when they cancel or do not project.
+  std::optional<Eigen::Vector2d> WedgeDirection(const PoseEkf& ekf, int index) const;
   std::optional<Eigen::Vector2d> CornerWhereEdgesMeet(const PoseEkf& ekf, const Frame& f, int index, int corner) const;
   void ApplyFineMatches(PoseEkf& ekf, Frame& f, const std::vector<std::pair<int, int>>& matches,
                         const std::vector<std::optional<Segment>>& line_matches);

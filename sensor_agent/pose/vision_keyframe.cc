@@ -209,7 +209,7 @@ void VisionTracker::Impl::UpdateKeyframe(PoseEkf& ekf, Frame& f) {
 void VisionTracker::Impl::DetectCorners(Frame& f) const {
   cv::goodFeaturesToTrack(f.gray, f.frame_corners, 1500, 0.005, 3);
   if (!f.frame_corners.empty()) {
-    cv::cornerSubPix(f.gray, f.frame_corners, cv::Size(4, 4), cv::Size(-1, -1),
+    cv::cornerSubPix(f.gray, f.frame_corners, cv::Size(options.corner_window_px, options.corner_window_px), cv::Size(-1, -1),
                      cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 20, 0.03));
   }
   f.corners = ToIdeal(f.frame_corners);  // where the filter measures
@@ -471,6 +471,22 @@ std::optional<Eigen::Vector2d> VisionTracker::Impl::CornerWhereEdgesMeet(const P
   return Eigen::Vector2d(ideal[0].x, ideal[0].y);
 }
 
+std::optional<Eigen::Vector2d> VisionTracker::Impl::WedgeDirection(const PoseEkf& ekf, int index) const {
+  const Eigen::Vector3d& p = map.points[index];
+  const std::optional<Eigen::Vector2d> at = ekf.ProjectPoint(k, p);
+  if (!at) return std::nullopt;
+  Eigen::Vector2d sum = Eigen::Vector2d::Zero();
+  int n = 0;
+  for (const Eigen::Vector3d& edge : point_edges[index]) {
+    const std::optional<Eigen::Vector2d> near = ekf.ProjectPoint(k, p + edge * std::min(1.0, 0.5 / edge.norm()));
+    if (!near || (*near - *at).norm() < 1e-6) continue;
+    sum += (*near - *at).normalized();
+    ++n;
+  }
+  if (n == 0 || sum.norm() < 0.3) return std::nullopt;
+  return sum.normalized();
+}
+
 // The fine pass's updates of the filter, points then lines, within the frame's budget; the
 // accepted ones are followed by KLT (points) and edge search (lines) until the next keyframe.
 void VisionTracker::Impl::ApplyFineMatches(PoseEkf& ekf, Frame& f, const std::vector<std::pair<int, int>>& matches,
@@ -494,6 +510,9 @@ void VisionTracker::Impl::ApplyFineMatches(PoseEkf& ekf, Frame& f, const std::ve
         ++f.stats.rejected_structure;
         continue;
       }
+    }
+    if (options.corner_bias_px > 0 && uv == Eigen::Vector2d(f.corners[j].x, f.corners[j].y)) {
+      if (const std::optional<Eigen::Vector2d> into = WedgeDirection(ekf, index)) uv -= options.corner_bias_px * *into;
     }
     const Eigen::Vector2d correction = uv - Eigen::Vector2d(f.corners[j].x, f.corners[j].y);
     f.stats.point_matches.emplace_back(map.points[index], uv);

@@ -426,6 +426,61 @@ TEST_F(VisionTest, WallFeetWeighLessAlongTheirTracksToo) {
   EXPECT_LT(shrink_4, 0.9 * shrink_1) << "shrink at 1x " << shrink_1 << ", at 4x " << shrink_4;
 }
 
+// Issue 19, fourteenth session: corner_bias_px moves each known corner's measurement back out of
+// its wedge, by the option's length, on the keyframe and along the KLT track: a wall foot's (its
+// wall above it) down; a wall top's never down, and up where its wall edge below outweighs a roof
+// edge above (an eaves corner whose hip rises behind it moves along the eaves).
+TEST_F(VisionTest, CornerBiasMovesMeasurementsOutOfTheirWedge) {
+  const scene::CameraSpec& camera = *scenario_->world.FindCamera("backpack");
+  const auto [frame, truth] = BackpackAt4s();
+  const Rigid3d start = Off(truth, {0.05, -0.05, 0.02}, {0.05, -0.1, 0.05});
+  auto matches = [&](double bias) {
+    VisionOptions options;
+    options.corner_bias_px = bias;
+    options.lock_frames = 1;
+    VisionTracker vision = CampusTracker(camera.intrinsics, options);
+    PoseEkf ekf;
+    ekf.Initialize(0, start, 0.3, 1 * kDeg);
+    const VisionFrameStats key = vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
+    EXPECT_TRUE(key.keyframe);
+    const VisionFrameStats tracked = vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
+    EXPECT_FALSE(tracked.keyframe);
+    return std::make_pair(key.point_matches, tracked.point_matches);
+  };
+  const auto [key0, tracked0] = matches(0.0);
+  const auto [key4, tracked4] = matches(0.4);
+  auto check = [&](const auto& plain, const auto& moved, const char* what) {
+    SCOPED_TRACE(what);
+    int common = 0, by_length = 0, tops_up = 0, tops_down = 0, tops = 0, feet_down = 0, feet = 0;
+    for (const auto& [p, uv] : moved) {
+      for (const auto& [q, uv0] : plain) {
+        if ((p - q).norm() > 1e-9) continue;
+        ++common;
+        const Eigen::Vector2d d = uv - uv0;
+        by_length += std::abs(d.norm() - 0.4) < 0.02;
+        // The campus's ground rolls by a metre or two: a foot may lie a little above the eye.
+        if (p.z() > truth.translation.z() + 3) {
+          ++tops;
+          tops_up += d.y() < -0.1;
+          tops_down += d.y() > 0.02;
+        } else if (p.z() < truth.translation.z() + 1.5) {
+          ++feet;
+          feet_down += d.y() > 0.1;
+        }
+      }
+    }
+    EXPECT_GE(common, 10);
+    EXPECT_GE(by_length, common * 9 / 10);
+    EXPECT_GE(tops, 3);
+    EXPECT_GE(feet, 3);
+    EXPECT_GE(tops_up, tops / 2);
+    EXPECT_EQ(tops_down, 0);
+    EXPECT_EQ(feet_down, feet);
+  };
+  check(key0, key4, "keyframe");
+  check(tracked0, tracked4, "tracked");
+}
+
 // Issue 19, tenth session: a frame whose left half a near object covers fits nowhere as a whole,
 // but its right half does. Once the lock has held (local_fit_after_lock_s), the right half's
 // features still correct the pose and none is taken from the covered half; judged as a whole
@@ -744,6 +799,8 @@ TEST(VisionOptions, CheckNamesTheBadField) {
       {"feature_class_bias_px", [nan](VisionOptions& o) { o.feature_class_bias_px = nan; }},
       {"foot_variance_scale", [](VisionOptions& o) { o.foot_variance_scale = 0.5; }},
       {"corners_on_edges", [](VisionOptions& o) { o.corners_on_edges = 3; }},
+      {"corner_window_px", [](VisionOptions& o) { o.corner_window_px = 0; }},
+      {"corner_bias_px", [nan](VisionOptions& o) { o.corner_bias_px = nan; }},
       {"local_fit_px", [](VisionOptions& o) { o.local_fit_px = -1; }},
       {"local_fit_after_lock_s", [nan](VisionOptions& o) { o.local_fit_after_lock_s = nan; }},
       {"tracked_max_innovation_px", [](VisionOptions& o) { o.tracked_max_innovation_px = -1; }},

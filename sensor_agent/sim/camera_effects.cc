@@ -200,20 +200,22 @@ struct SimulatedCamera::Impl {
   cv::Mat map_x, map_y;
   std::vector<int64_t> nearest;
   std::vector<uint8_t> read;  // per ideal pixel: 1 where the resampling reads it (shade_only_read_pixels)
-  // pixel_area: samples per axis (1: off); the render is made with fine_intrinsics and fine_read
-  // (render_intrinsics and read, `area` times finer) and averaged down to render_intrinsics.
+  // pixel_area: samples per axis (1: off). The render, the lens's resampling and the masks work
+  // on `sensor`, the camera's intrinsics `area` times finer, and the last step averages each
+  // area x area block down to the camera's pixel: the lens bends the continuous image, and the
+  // photosite integrates what lands on it.
   int area = 1;
-  PinholeIntrinsics fine_intrinsics;
-  std::vector<uint8_t> fine_read;
+  PinholeIntrinsics sensor;
   mutable std::vector<StageTime> timings;
 };
 
 namespace {
 
-// render_intrinsics `s` times finer: fine pixel U's centre lies at coarse (U + 0.5) / s - 0.5, so
+// `k` `s` times finer: fine pixel U's centre lies at coarse (U + 0.5) / s - 0.5, so
 // the s x s fine pixels of coarse pixel u tile its area exactly.
 PinholeIntrinsics FinerIntrinsics(const PinholeIntrinsics& k, int s) {
   PinholeIntrinsics f = k;
+  if (s == 1) return f;
   f.width = k.width * s;
   f.height = k.height * s;
   f.fx = k.fx * s;
@@ -262,7 +264,10 @@ SimulatedCamera::SimulatedCamera(const scene::SyntheticCampus& campus, const sce
   impl_->seed = seed;
   if (const EffectParams* p = effects.Find(EffectKind::kWavingVegetation)) renderer_options.waving_vegetation = *p;
   impl_->renderer = std::make_unique<CampusRenderer>(campus, renderer_options);
-  const PinholeIntrinsics& k = camera.intrinsics;
+  if (const EffectParams* p = effects.Find(EffectKind::kPixelArea))
+    impl_->area = std::clamp(static_cast<int>(std::lround(p->Get("samples", 3))), 1, kMaxPixelAreaSamples);
+  impl_->sensor = FinerIntrinsics(camera.intrinsics, impl_->area);
+  const PinholeIntrinsics& k = impl_->sensor;
   impl_->render_intrinsics = k;
   bool any = false;
   for (double d : k.distortion) any |= d != 0;
@@ -340,21 +345,6 @@ SimulatedCamera::SimulatedCamera(const scene::SyntheticCampus& campus, const sce
       if (!all_finite) impl_->read.clear();  // shade everything
     }
   }
-  if (const EffectParams* p = effects.Find(EffectKind::kPixelArea)) {
-    Impl& m = *impl_;
-    m.area = std::clamp(static_cast<int>(std::lround(p->Get("samples", 3))), 1, kMaxPixelAreaSamples);
-    m.fine_intrinsics = FinerIntrinsics(m.render_intrinsics, m.area);
-    if (!m.read.empty()) {
-      const int w = m.render_intrinsics.width, s = m.area;
-      m.fine_read.assign(m.read.size() * s * s, 0);
-      for (size_t i = 0; i < m.read.size(); ++i) {
-        if (!m.read[i]) continue;
-        const int u = static_cast<int>(i % w), v = static_cast<int>(i / w);
-        for (int dv = 0; dv < s; ++dv)
-          for (int du = 0; du < s; ++du) m.fine_read[static_cast<size_t>(v * s + dv) * m.fine_intrinsics.width + u * s + du] = 1;
-      }
-    }
-  }
 }
 
 SimulatedCamera::SimulatedCamera(SimulatedCamera&&) noexcept = default;
@@ -375,10 +365,7 @@ SimImage SimulatedCamera::Frame(int64_t frame_index, double t_s) const {
     clock = now;
   };
   CampusRenderer::Stats stats;
-  const bool fine = m.area > 1;
-  const std::vector<uint8_t>& read = fine ? m.fine_read : m.read;
-  SimImage image = m.renderer->Render(fine ? m.fine_intrinsics : m.render_intrinsics, PoseAt(t_s), t_s, &stats,
-                                      read.empty() ? nullptr : &read);
+  SimImage image = m.renderer->Render(m.render_intrinsics, PoseAt(t_s), t_s, &stats, m.read.empty() ? nullptr : &m.read);
   lap("render");
   if (m.effects.Has(EffectKind::kWavingVegetation)) {
     // Renderer side: reported apart from the render it happened inside.
@@ -386,13 +373,9 @@ SimImage SimulatedCamera::Frame(int64_t frame_index, double t_s) const {
     m.timings.push_back({"waving_vegetation", stats.waving_vegetation_s});
   }
   if (image.width == 0) return image;
-  if (fine) {
-    image = AveragePixelArea(image, m.area, m.render_intrinsics.width, m.render_intrinsics.height);
-    lap("pixel_area");
-  }
   const uint64_t frame_seed = FrameSeed(m.seed, frame_index);
   if (m.distorted) {
-    const PinholeIntrinsics& k = m.camera.intrinsics;
+    const PinholeIntrinsics& k = m.sensor;
     SimImage out;
     out.width = k.width;
     out.height = k.height;
@@ -412,6 +395,10 @@ SimImage SimulatedCamera::Frame(int64_t frame_index, double t_s) const {
     }
     image = std::move(out);
     lap("lens_distortion");
+  }
+  if (m.area > 1) {
+    image = AveragePixelArea(image, m.area, m.camera.intrinsics.width, m.camera.intrinsics.height);
+    lap("pixel_area");
   }
   if (const EffectParams* p = m.effects.Find(EffectKind::kRollingOcclusion)) {
     ApplyRollingOcclusion(*p, m.seed, t_s, image);

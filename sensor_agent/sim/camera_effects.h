@@ -17,8 +17,9 @@
 //                                                                 depths are the centre sample's (renderer side)
 //
 // SimulatedCamera is the camera pipeline: render (sim_camera.h, with waving_vegetation inside)
-// -> pixel_area -> lens distortion (a camera property, not an effect: the ideal render is warped by the
-// intrinsics' Brown-Conrady coefficients, masks by nearest neighbour) -> rolling_occlusion ->
+// -> lens distortion (a camera property, not an effect: the ideal render is warped by the
+// intrinsics' Brown-Conrady coefficients, masks by nearest neighbour) -> pixel_area (render and lens
+// work `samples` times finer, then each pixel averages its block) -> rolling_occlusion ->
 // illumination -> camera_noise -> jpeg_artefacts. Frame k's random numbers come from (seed, k) only, so a frame is the same
 // whenever it is rendered. With no effects and no distortion a frame is exactly the render.
 #include <cstdint>

@@ -106,6 +106,8 @@ struct PoseBenchOptions {
   double feature_class_bias_px = pose::VisionOptions{}.feature_class_bias_px;  // issue 19, ninth session
   double foot_variance_scale = pose::VisionOptions{}.foot_variance_scale;      // issue 19, tenth session
   int corners_on_edges = pose::VisionOptions{}.corners_on_edges;              // issue 19, thirteenth session
+  int corner_window_px = pose::VisionOptions{}.corner_window_px;              // issue 19, fourteenth session
+  double corner_bias_px = pose::VisionOptions{}.corner_bias_px;               // issue 19, fourteenth session
   double local_fit_px = pose::VisionOptions{}.local_fit_px;                    // issue 19, tenth session
   double robust_residual_px = pose::VisionOptions{}.robust_residual_px;
   double gyro_bias_sigma_rad_s = pose::PoseFilterOptions{}.gyro_bias_sigma_rad_s;
@@ -573,6 +575,8 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.feature_class_bias_px = o.feature_class_bias_px;
     vo.foot_variance_scale = o.foot_variance_scale;
     vo.corners_on_edges = o.corners_on_edges;
+    vo.corner_window_px = o.corner_window_px;
+    vo.corner_bias_px = o.corner_bias_px;
     vo.local_fit_px = o.local_fit_px;
     vo.robust_residual_px = o.robust_residual_px;
     vo.use_lines = o.lines;
@@ -1159,6 +1163,12 @@ Runner AddPoseBench(CLI::App& sub) {
                  "known corners measured where their model edges meet (issue 19, thirteenth session): 0 as detected, 1 moved where found, 2 also refused where not")
       ->capture_default_str()
       ->check(ave::cli::Range(0, 2));
+  sub.add_option("--corner-window", o->corner_window_px, "half size of cv::cornerSubPix's window for every corner, px (issue 19, fourteenth session)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(1, 8));
+  sub.add_option("--corner-bias", o->corner_bias_px, "move each known corner's measurement this far back out of its wedge, px (issue 19, fourteenth session; 0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 3.0));
   sub.add_option("--foot-variance-scale", o->foot_variance_scale,
                  "a wall foot's match (known point below the camera) gets this many times a wall top's pixel variance (issue 19, tenth session; 1: same)")
       ->capture_default_str()
