@@ -658,7 +658,7 @@ TEST_F(VisionTest, UnknownFeaturesReMatchedOnTheKeyframeDriftLessThanChainedFram
 }
 
 // Issue 19: innovations larger than the run's usual (here: tracked frames whose halves move apart by
-// 6 px, which no pose explains)
+// 8 px, which no pose explains)
 // scale the reported covariance up; the filter's own covariance is untouched, and steady frames
 // bring the scale back to 1.
 TEST_F(VisionTest, LargerInnovationsThanUsualScaleTheReportedCovariance) {
@@ -668,7 +668,7 @@ TEST_F(VisionTest, LargerInnovationsThanUsualScaleTheReportedCovariance) {
   VisionOptions options;
   options.lock_frames = 3;
   options.lock_sigma_px = 4;
-  // The 3 px shifts below would otherwise end every tracked feature as slid off its corner
+  // The 4 px shifts below would otherwise end every tracked feature as slid off its corner
   // (TrackedFeaturesThatSlidOffTheirCornerAreRefused): this test is about the innovations of
   // features that are applied.
   options.tracked_max_innovation_px = 0;
@@ -679,10 +679,10 @@ TEST_F(VisionTest, LargerInnovationsThanUsualScaleTheReportedCovariance) {
   std::vector<double> nis, scale;
   for (int f = first; f < first + 34; ++f) {
     sim::SimImage frame = sim_camera.Frame(f, f / 30.0);
-    if (f >= first + 25 && f < first + 28) {  // three frames between keyframes: the left half 3 px down, the right half 3 px up
+    if (f >= first + 25 && f < first + 28) {  // three frames between keyframes: the left half 4 px down, the right half 4 px up
       cv::Mat view(frame.height, frame.width, CV_8UC3, frame.bgr.data()), down, up;
-      cv::warpAffine(view, down, cv::Matx23d(1, 0, 0, 0, 1, 3), view.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
-      cv::warpAffine(view, up, cv::Matx23d(1, 0, 0, 0, 1, -3), view.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+      cv::warpAffine(view, down, cv::Matx23d(1, 0, 0, 0, 1, 4), view.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+      cv::warpAffine(view, up, cv::Matx23d(1, 0, 0, 0, 1, -4), view.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
       down(cv::Rect(0, 0, frame.width / 2, frame.height)).copyTo(view(cv::Rect(0, 0, frame.width / 2, frame.height)));
       up(cv::Rect(frame.width / 2, 0, frame.width - frame.width / 2, frame.height)).copyTo(view(cv::Rect(frame.width / 2, 0, frame.width - frame.width / 2, frame.height)));
     }
@@ -702,9 +702,10 @@ TEST_F(VisionTest, LargerInnovationsThanUsualScaleTheReportedCovariance) {
   }
   const double steady_nis = *std::max_element(nis.begin() + 10, nis.begin() + 25);
   EXPECT_GT(nis[25], 2 * steady_nis) << "the shifted frame's innovations";
-  // (Tracked features at tracked_sigma_px 0.6 leave the frames' NIS noisier than at 1.0: a few
-  // per cent of scale while the frames agree.)
-  EXPECT_LT(*std::max_element(scale.begin() + 10, scale.begin() + 25), 1.15) << "barely a scale while the frames agree";
+  // (Tracked features at tracked_sigma_px 0.6 leave the frames' NIS noisier than at 1.0, and the
+  // 1.2 px pixel sigma of the fifteenth session more than the 1.5 before: up to 17 % of scale while
+  // the frames agree. The shift was 3 px each way at 1.5 px.)
+  EXPECT_LT(*std::max_element(scale.begin() + 10, scale.begin() + 25), 1.25) << "barely a scale while the frames agree";
   EXPECT_GT(*std::max_element(scale.begin() + 25, scale.begin() + 29), 1.5);
   EXPECT_EQ(*std::min_element(scale.begin() + 29, scale.begin() + 34), 1.0) << "back to the filter's own covariance";
 }

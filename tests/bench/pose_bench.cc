@@ -84,6 +84,8 @@ struct PoseBenchOptions {
   double acquiring_sigma_px = pose::VisionOptions{}.acquiring_sigma_px;  // issue 19
   double gyro_sigma_rad_s = pose::PoseFilterOptions{}.gyro_sigma_rad_s;
   bool gyro_bias = pose::PoseFilterOptions{}.estimate_gyro_bias;  // issue 19: the bias in the state
+  double accel_noise_m_s2 = pose::PoseFilterOptions{}.accel_noise_m_s2;  // issue 19, fifteenth session
+  double angular_accel_noise_rad_s2 = pose::PoseFilterOptions{}.angular_accel_noise_rad_s2;
   double acquisition_sigma_m = pose::VisionOptions{}.acquisition_position_sigma_m;  // issue 19
   double acquisition_sigma_deg = pose::VisionOptions{}.acquisition_orientation_sigma_deg;
   double feature_bias_px = pose::VisionOptions{}.feature_bias_px;
@@ -436,7 +438,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
   std::FILE* match_csv = o.match_csv.empty() ? nullptr : std::fopen(o.match_csv.c_str(), "w");
   if (match_csv) std::fprintf(match_csv, "row,t_s,keyframe,x,y,z,depth_m,u,v,true_u,true_v\n");
   if (nees_csv) {
-    std::fprintf(nees_csv, "row,t_s,keyframe,nees,nees_pos,nees_rot,dx,sx,dy,sy,dz,sz,dpitch,spitch,dyaw,syaw,droll,sroll,median_px,nis,reported_scale\n");
+    std::fprintf(nees_csv, "row,t_s,keyframe,nees,nees_pos,nees_rot,dx,sx,dy,sy,dz,sz,dpitch,spitch,dyaw,syaw,droll,sroll,median_px,nis,reported_scale,nees_zpitch,rho_zpitch\n");
   }
   std::vector<Run> runs;
   for (int features : o.features) runs.push_back({features, "", features == 0 ? "gps_imu" : "gps_imu_vision_" + std::to_string(features), nullptr});
@@ -461,9 +463,9 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
       runs.push_back({50, knob, "gps_imu_vision_50_" + key, std::move(vtweak), nullptr, std::move(tweak)});
     };
     add_filter("pixel sigma 2.0 px", "pixel_sigma_2", [](pose::PoseFilterOptions& f) { f.pixel_sigma_px = 2.0; });
-    add_filter("gyro bias in the state (issue 19)", "gyro_bias", [](pose::PoseFilterOptions& f) { f.estimate_gyro_bias = true; });
-    add_filter("gyro bias in the state, prior widened by 1 m / 1 deg before the first frame", "gyro_bias_acquisition",
-               [](pose::PoseFilterOptions& f) { f.estimate_gyro_bias = true; },
+    add_filter("pixel sigma 1.5 px (before the fifteenth session)", "pixel_sigma_1_5", [](pose::PoseFilterOptions& f) { f.pixel_sigma_px = 1.5; });
+    add_filter("no gyro bias in the state (before the fifteenth session)", "no_gyro_bias", [](pose::PoseFilterOptions& f) { f.estimate_gyro_bias = false; });
+    add_filter("gyro bias in the state, prior widened by 1 m / 1 deg before the first frame", "gyro_bias_acquisition", nullptr,
                [](pose::VisionOptions& v) { v.acquisition_position_sigma_m = 1.0, v.acquisition_orientation_sigma_deg = 1.0; });
     add_filter("angular acceleration noise 3 rad/s2/sqrt(Hz)", "angular_accel_3", [](pose::PoseFilterOptions& f) { f.angular_accel_noise_rad_s2 = 3.0; });
     add_filter("acceleration noise 1 m/s2/sqrt(Hz) (before issue 19)", "accel_1", [](pose::PoseFilterOptions& f) { f.accel_noise_m_s2 = 1.0; });
@@ -540,6 +542,8 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     fo.gyro_sigma_rad_s = o.gyro_sigma_rad_s;
     fo.estimate_gyro_bias = o.gyro_bias;
     fo.gyro_bias_sigma_rad_s = o.gyro_bias_sigma_rad_s;
+    fo.accel_noise_m_s2 = o.accel_noise_m_s2;
+    fo.angular_accel_noise_rad_s2 = o.angular_accel_noise_rad_s2;
     if (run.filter_tweak) run.filter_tweak(fo);
     pose::PoseTracker tracker(log, fo);
     pose::VisionOptions vo;
@@ -724,7 +728,14 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
         std::fprintf(nees_csv, "%s,%.4f,%d,%.4f,%.4f,%.4f", run.key.c_str(), t_s, static_cast<int>(vision_keyframe), nees, nees_pos, nees_rot);
         for (int i = 0; i < 3; ++i) std::fprintf(nees_csv, ",%.5f,%.5f", dp[i], std::sqrt(p_pos(i, i)));
         for (int i = 0; i < 3; ++i) std::fprintf(nees_csv, ",%.6f,%.6f", dth_c[i], std::sqrt(p_rot_c(i, i)));
-        std::fprintf(nees_csv, ",%.4f,%.3f,%.3f\n", row.frame_median_px.empty() ? -1.0 : row.frame_median_px.back(), frame_nis, frame_scale);
+        // The height and the pitch together (issue 19: a draw's pitch error follows its height
+        // error), with the correlation the filter reports between them.
+        const Eigen::Vector3d c_z_rot = r_cw * current.covariance.block<3, 3>(0, 3).row(2).transpose();
+        Eigen::Matrix2d p_zp;
+        p_zp << p_pos(2, 2), c_z_rot[0], c_z_rot[0], p_rot_c(0, 0);
+        const Eigen::Vector2d e_zp(dp[2], dth_c[0]);
+        std::fprintf(nees_csv, ",%.4f,%.3f,%.3f,%.4f,%.4f\n", row.frame_median_px.empty() ? -1.0 : row.frame_median_px.back(), frame_nis, frame_scale,
+                     e_zp.dot(p_zp.ldlt().solve(e_zp)), c_z_rot[0] / std::sqrt(p_zp(0, 0) * p_zp(1, 1)));
       }
       ++row.nees_frames;
       row.nees_in_band += nees >= kNeesLow && nees <= kNeesHigh;
@@ -1103,7 +1114,13 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--gyro-sigma", o->gyro_sigma_rad_s, "gyro rate sigma, rad/s (PoseFilterOptions::gyro_sigma_rad_s)")
       ->capture_default_str()
       ->check(ave::cli::Range(1e-6, 10.0));
-  sub.add_option("--gyro-bias", o->gyro_bias, "estimate the gyro bias in the filter state (issue 19; off by default: it makes this run worse, docs/POSE.md)")->capture_default_str();
+  sub.add_option("--gyro-bias", o->gyro_bias, "estimate the gyro bias in the filter state (issue 19; on since the fifteenth session, docs/POSE.md)")->capture_default_str();
+  sub.add_option("--accel-noise", o->accel_noise_m_s2, "white acceleration noise, m/s2/sqrt(Hz) (PoseFilterOptions::accel_noise_m_s2)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(1e-3, 100.0));
+  sub.add_option("--angular-accel-noise", o->angular_accel_noise_rad_s2, "white angular acceleration noise, rad/s2/sqrt(Hz)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(1e-3, 100.0));
   sub.add_option("--gyro-bias-sigma", o->gyro_bias_sigma_rad_s, "initial sigma of the gyro bias state, rad/s")
       ->capture_default_str()
       ->check(ave::cli::Range(1e-6, 1.0));
