@@ -136,7 +136,8 @@ UpdateResult PoseEkf::Predict(int64_t t_ns) {
 
 template <int M>
 UpdateResult PoseEkf::Correct(const Eigen::Matrix<double, M, 1>& innovation, const Eigen::Matrix<double, M, kErrorDim>& H,
-                              const Eigen::Matrix<double, M, M>& R, double gate_chi2, const Eigen::Matrix<double, M, M>* gate_R) {
+                              const Eigen::Matrix<double, M, M>& R, double gate_chi2, const Eigen::Matrix<double, M, M>* gate_R,
+                              const Eigen::Matrix<double, M, M>* noise_R) {
   if (!AllFinite(innovation) || !AllFinite(H) || !AllFinite(R)) return {Rejection::kNotFinite, 0};
   const Eigen::Matrix<double, kErrorDim, M> PHt = P_ * H.transpose();
   if (gate_R) {
@@ -170,7 +171,7 @@ UpdateResult PoseEkf::Correct(const Eigen::Matrix<double, M, 1>& innovation, con
     CorrectLandmarks<M>(K, KL, S, innovation);
   }
   const StateMatrix I_KH = StateMatrix::Identity() - K * H;
-  P_ = I_KH * P_ * I_KH.transpose() + K * R * K.transpose();  // Joseph form
+  P_ = I_KH * P_ * I_KH.transpose() + K * (noise_R ? *noise_R : R) * K.transpose();  // Joseph form
   CorrectBiases<M>(K, KL, H * bias_sensitivity_, H * gps_bias_sensitivity_);
   Inject(K * innovation);
   Condition();
@@ -529,8 +530,9 @@ int PoseEkf::BiasIndex(int64_t id, double sigma_px) {
 }
 
 UpdateResult PoseEkf::UpdatePoint(const PinholeIntrinsics& k, const Eigen::Vector3d& point_in_world, const Eigen::Vector2d& uv,
-                                  double extra_variance_px2, std::array<PointBias, 2> biases, double variance_scale) {
-  if (!uv.allFinite() || !point_in_world.allFinite() || !std::isfinite(extra_variance_px2) || !std::isfinite(variance_scale)) {
+                                  double extra_variance_px2, std::array<PointBias, 2> biases, double variance_scale, double gain_scale) {
+  if (!uv.allFinite() || !point_in_world.allFinite() || !std::isfinite(extra_variance_px2) || !std::isfinite(variance_scale) ||
+      !std::isfinite(gain_scale)) {
     return {Rejection::kNotFinite, 0};
   }
   Eigen::Matrix<double, 2, kErrorDim> H;
@@ -544,8 +546,10 @@ UpdateResult PoseEkf::UpdatePoint(const PinholeIntrinsics& k, const Eigen::Vecto
   }
   const Eigen::Matrix2d R = Eigen::Matrix2d::Identity() * var;
   const Eigen::Matrix2d scaled = R * std::max(1.0, variance_scale);
-  const UpdateResult r = variance_scale > 1 ? Correct<2>(uv - *predicted, H, scaled, options_.gate_chi2_2dof, &R)
-                                            : Correct<2>(uv - *predicted, H, R, options_.gate_chi2_2dof);
+  const Eigen::Matrix2d for_gain = scaled * std::max(1.0, gain_scale);
+  const UpdateResult r = gain_scale > 1       ? Correct<2>(uv - *predicted, H, for_gain, options_.gate_chi2_2dof, &R, &scaled)
+                         : variance_scale > 1 ? Correct<2>(uv - *predicted, H, scaled, options_.gate_chi2_2dof, &R)
+                                              : Correct<2>(uv - *predicted, H, R, options_.gate_chi2_2dof);
   current_biases_ = {-1, -1};
   return r;
 }

@@ -169,8 +169,13 @@ class PoseEkf {
   // `variance_scale` (>= 1; issue 19, ninth session): a robust weight, the pixel variance scaled
   // for the update only; the gate tests the innovation at the unscaled variance, so a down-weighted
   // match is refused exactly when an unweighted one would be.
+  // `gain_scale` (>= 1; issue 19, fifteenth session): a weight on the gain alone. The gain is
+  // computed at the (scaled) variance times gain_scale, but the covariance is updated (Joseph
+  // form, valid for any gain) at the variance without it: the match is believed less, and the
+  // filter's covariance says what such a gain leaves, not that the pixel is noisier. For an error
+  // that persists (a point's learned misfit), whose size is a consider bias's, not white noise.
   UpdateResult UpdatePoint(const PinholeIntrinsics& k, const Eigen::Vector3d& point_in_world, const Eigen::Vector2d& uv,
-                           double extra_variance_px2 = 0, std::array<PointBias, 2> biases = {}, double variance_scale = 1);
+                           double extra_variance_px2 = 0, std::array<PointBias, 2> biases = {}, double variance_scale = 1, double gain_scale = 1);
   // A 3D line seen as the image segment (a, b): residual = signed pixel distances of a and b from
   // the projected infinite line.
   UpdateResult UpdateLine(const PinholeIntrinsics& k, const Line3d& line, const Eigen::Vector2d& a, const Eigen::Vector2d& b,
@@ -255,9 +260,11 @@ class PoseEkf {
 
  private:
   template <int M>
-  // `gate_R`: the measurement covariance the gate tests with (nullptr: R).
+  // `gate_R`: the measurement covariance the gate tests with (nullptr: R). `noise_R`: the one the
+  // covariance is updated with (nullptr: R, the one the gain is computed with).
   UpdateResult Correct(const Eigen::Matrix<double, M, 1>& innovation, const Eigen::Matrix<double, M, kErrorDim>& H,
-                       const Eigen::Matrix<double, M, M>& R, double gate_chi2, const Eigen::Matrix<double, M, M>* gate_R = nullptr);
+                       const Eigen::Matrix<double, M, M>& R, double gate_chi2, const Eigen::Matrix<double, M, M>* gate_R = nullptr,
+                       const Eigen::Matrix<double, M, M>* noise_R = nullptr);
   void Inject(const StateVector& dx);
   void Condition();
   int LandmarkIndex(int64_t id) const;

@@ -328,6 +328,38 @@ TEST(PoseEkf, ARobustWeightScalesTheUpdateButNotTheGate) {
   EXPECT_EQ(refused.UpdatePoint(Camera(), point, near, 0, {}, std::nan("")).rejection, Rejection::kNotFinite);
 }
 
+// Issue 19, fifteenth session: a weight on the gain alone (UpdatePoint's gain_scale). The pose
+// moves as far as an update at the scaled variance moves it, but the covariance is the Joseph
+// form of that gain at the true variance: smaller than the scaled update's (the pixel is not
+// noisier), larger than the optimal update's (a gain below the optimum leaves more), and exactly
+// (I - KH) P (I - KH)' + K R K'.
+TEST(PoseEkf, AWeightOnTheGainAloneKeepsTheCovarianceAtTheTrueNoise) {
+  const PoseEkf start = Filter(Rigid3d(), 0.02, 0.05 * kDeg);
+  const Eigen::Vector3d point(1, -0.5, 20);
+  Eigen::Matrix<double, 2, kErrorDim> H;
+  const Eigen::Vector2d predicted = *start.ProjectPoint(Camera(), point, &H);
+  const double var = start.options().pixel_sigma_px * start.options().pixel_sigma_px;
+  const Eigen::Vector2d seen = predicted + Eigen::Vector2d(1.5, -1);
+
+  PoseEkf gained = start, scaled = start, plain = start;
+  ASSERT_TRUE(gained.UpdatePoint(Camera(), point, seen, 0, {}, 1, 5.0).accepted());
+  ASSERT_TRUE(scaled.UpdatePoint(Camera(), point, seen, 4 * var).accepted());  // the variance x 5
+  ASSERT_TRUE(plain.UpdatePoint(Camera(), point, seen).accepted());
+  EXPECT_TRUE(gained.world_from_camera().translation.isApprox(scaled.world_from_camera().translation, 1e-12));
+
+  const StateMatrix P = start.covariance();
+  const Eigen::Matrix2d S = H * P * H.transpose() + 5 * var * Eigen::Matrix2d::Identity();
+  const Eigen::Matrix<double, kErrorDim, 2> K = P * H.transpose() * S.inverse();
+  const StateMatrix I_KH = StateMatrix::Identity() - K * H;
+  const StateMatrix joseph = I_KH * P * I_KH.transpose() + var * K * K.transpose();
+  EXPECT_TRUE(gained.covariance().isApprox(joseph, 1e-9));
+  auto position_trace = [](const PoseEkf& e) { return e.covariance().topLeftCorner<3, 3>().trace(); };
+  EXPECT_LT(position_trace(gained), position_trace(scaled));
+  EXPECT_GT(position_trace(gained), position_trace(plain));
+  EXPECT_TRUE(gained.covariance().isApprox(gained.covariance().transpose(), 1e-12));
+  EXPECT_EQ(PoseEkf(start).UpdatePoint(Camera(), point, seen, 0, {}, 1, std::nan("")).rejection, Rejection::kNotFinite);
+}
+
 TEST(PoseEkf, TimeMustNotGoBackwardsAndZeroDtIsANoOp) {
   PoseEkf ekf = Filter(Rigid3d());
   ASSERT_TRUE(ekf.Predict(1'000'000'000).accepted());

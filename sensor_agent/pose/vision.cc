@@ -57,6 +57,8 @@ std::string VisionOptions::Check() const {
   if (corners_on_edges < 0 || corners_on_edges > 2) return "corners_on_edges must be 0, 1 or 2";
   if (corner_window_px < 1 || corner_window_px > 8) return "corner_window_px must be 1 to 8";
   if (!(corner_bias_px >= 0 && corner_bias_px <= 3)) return "corner_bias_px must be 0 to 3";
+  if (!(point_bias_gain >= 0 && point_bias_gain <= 1)) return "point_bias_gain must be 0 to 1";
+  if (!(point_bias_weight_px >= 0) || !std::isfinite(point_bias_weight_px)) return "point_bias_weight_px must be finite and >= 0";
   if (!(foot_variance_scale >= 1 && std::isfinite(foot_variance_scale))) return "foot_variance_scale must be finite and >= 1";
   if (!(local_fit_px >= 0 && std::isfinite(local_fit_px)) || !(local_fit_after_lock_s >= 0 && std::isfinite(local_fit_after_lock_s)))
     return "local_fit_px and local_fit_after_lock_s must be finite and >= 0";
@@ -477,7 +479,7 @@ void VisionTracker::Impl::UpdateTrackedPoints(PoseEkf& ekf, Frame& f) {
     const UpdateResult r = ekf.UpdatePoint(k, p, f.known_uv[i], options.tracked_sigma_px * options.tracked_sigma_px,
                                            {{{BiasId(known[i].index), PointBiasPx(known[i].index, ekf.world_from_camera().translation)},
                                              SharedBias(known[i].index, ekf.world_from_camera().translation)}},
-                                           known[i].variance_scale);
+                                           known[i].variance_scale, known[i].gain_scale);
     Count(r, f.stats.points_used, f.stats);
     if (r.accepted()) kept.push_back(known[i]);
   }

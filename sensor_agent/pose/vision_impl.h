@@ -55,6 +55,7 @@ struct KnownTrack {
   cv::Point2f px;     // in the (distorted) frame
   cv::Point2f key_px;  // where it was on the keyframe, which KLT matches against (no drift)
   double variance_scale = 1;  // its keyframe match's robust weight (VisionOptions::robust_residual_px), kept along the track
+  double gain_scale = 1;      // its learned misfit's weight on the gain (VisionOptions::point_bias_weight_px), kept along the track
   Eigen::Vector2d correction = Eigen::Vector2d::Zero();  // ideal px from the keyframe's detected corner to where its edges meet
 };
 
@@ -118,6 +119,7 @@ struct VisionTracker::Impl {
     // Keyframes the model fits nowhere as a whole: per known point and line, whether its own
     // stretch of the outline lies nowhere either (VisionOptions::local_fit_px); empty: all fit.
     std::vector<bool> point_unfit, line_unfit;
+    std::vector<std::pair<int, Eigen::Vector2d>> applied_points;  // keyframes: known points the filter took, ideal pixels
   };
 
   FeatureMap map;
@@ -143,13 +145,34 @@ struct VisionTracker::Impl {
   double nis_short = -1, nis_long = -1;  // running means of the frames' NIS (VisionOptions::nis_short_gain; -1: none yet)
   cv::Ptr<cv::ximgproc::FastLineDetector> fast_lines;  // SegmentDetector::kFastLine, made on first use
   bool distorted = false;  // the frames show the lens distortion of the intrinsics
+  // Per known point, the running mean of its post-fit keyframe residual and how many went into it
+  // (VisionOptions::point_bias_gain).
+  std::vector<Eigen::Vector2d> misfit_mean;
+  std::vector<int> misfit_count;
+  // That misfit's per-axis RMS, px (0 until learned from 3 keyframes).
+  double LearnedMisfitPx(int index) const {
+    if (!(options.point_bias_gain > 0) || index >= static_cast<int>(misfit_count.size()) || misfit_count[index] < 3) return 0;
+    return misfit_mean[index].norm() / std::sqrt(2.0);
+  }
+  void LearnMisfits(const PoseEkf& ekf, const Frame& f);
   // The persisting-bias id of known point `index` (VisionOptions::feature_point_bias_px; -1: none).
   int64_t BiasId(int index) const { return options.feature_point_bias_px > 0 ? index : -1; }
   // Its sigma seen from `camera_centre` (feature_point_bias_near_px near, feature_point_bias_px far).
   double PointBiasPx(int index, const Eigen::Vector3d& camera_centre) const {
     const double d = (map.points[index] - camera_centre).norm(), near = options.feature_point_near_m;
     const double t = near > 0 ? std::clamp((d - near) / near, 0.0, 1.0) : 1.0;
-    return options.feature_point_bias_near_px + t * (options.feature_point_bias_px - options.feature_point_bias_near_px);
+    const double base = options.feature_point_bias_near_px + t * (options.feature_point_bias_px - options.feature_point_bias_near_px);
+    // A point weighed down by its misfit (point_bias_weight_px) keeps the base sigma: its misfit is
+    // then mostly out of the estimate, and as a consider sigma too it over-covered (13 draws: 79.7 %
+    // in band against 82.5 % at a 0.1 px base, docs/BENCHMARKS.md "fifteenth session").
+    return options.point_bias_weight_px > 0 ? base : std::max(base, LearnedMisfitPx(index));
+  }
+  // The gain's variance factor of known point `index` from its learned misfit
+  // (VisionOptions::point_bias_weight_px; 1: off or not learned yet).
+  double MisfitGainScale(int index) const {
+    if (!(options.point_bias_weight_px > 0)) return 1;
+    const double m = LearnedMisfitPx(index) / options.point_bias_weight_px;
+    return 1 + m * m;
   }
   // The id of the bias every known point shares (VisionOptions::feature_shared_bias_px; -1: none).
   int64_t SharedBiasId() const { return options.feature_shared_bias_px > 0 ? static_cast<int64_t>(map.points.size()) + 1 : -1; }

@@ -201,7 +201,29 @@ void VisionTracker::Impl::UpdateKeyframe(PoseEkf& ekf, Frame& f) {
   const PoseEkf coarse = CoarsePass(ekf, f, alignment, turn);
   FinePass(ekf, f, coarse, segments);
   UpdateLock(ekf, f, alignment, acquiring);
+  LearnMisfits(ekf, f);
   f.timer.Lap(kStageEkf);
+}
+
+// Each applied keyframe match's residual against the updated pose, into its point's running mean,
+// while the lock holds (VisionOptions::point_bias_gain). A pose declared lost forgets them all:
+// residuals from a wrong lock say nothing of the points.
+void VisionTracker::Impl::LearnMisfits(const PoseEkf& ekf, const Frame& f) {
+  if (!(options.point_bias_gain > 0)) return;
+  if (misfit_mean.size() != map.points.size()) misfit_mean.assign(map.points.size(), Eigen::Vector2d::Zero()), misfit_count.assign(map.points.size(), 0);
+  if (f.stats.relocks > 0) {
+    std::fill(misfit_mean.begin(), misfit_mean.end(), Eigen::Vector2d::Zero());
+    std::fill(misfit_count.begin(), misfit_count.end(), 0);
+    return;
+  }
+  if (!locked_once || good_full_matches < options.lock_frames) return;
+  for (const auto& [index, uv] : f.applied_points) {
+    const std::optional<Eigen::Vector2d> projected = ekf.ProjectPoint(k, map.points[index]);
+    if (!projected) continue;
+    const Eigen::Vector2d r = uv - *projected;
+    misfit_mean[index] = misfit_count[index] == 0 ? r : Eigen::Vector2d(misfit_mean[index] + options.point_bias_gain * (r - misfit_mean[index]));
+    ++misfit_count[index];
+  }
 }
 
 // Keyframe corners: detected and refined to sub-pixel in the frame (KLT and new tracks start
@@ -522,9 +544,13 @@ void VisionTracker::Impl::ApplyFineMatches(PoseEkf& ekf, Frame& f, const std::ve
                                  ? PointBias{static_cast<int64_t>(map.points.size()) + 2 + index, options.acquisition_association_px}
                                  : SharedBias(index, ekf.world_from_camera().translation);
     const UpdateResult r =
-        ekf.UpdatePoint(k, map.points[index], uv, acquiring_var, {{{BiasId(index), PointBiasPx(index, ekf.world_from_camera().translation)}, second}}, scale[m]);
+        ekf.UpdatePoint(k, map.points[index], uv, acquiring_var, {{{BiasId(index), PointBiasPx(index, ekf.world_from_camera().translation)}, second}}, scale[m],
+                        MisfitGainScale(index));
     Count(r, f.stats.points_used, f.stats);
-    if (r.accepted()) known.push_back({index, f.frame_corners[j], f.frame_corners[j], scale[m], correction});
+    if (r.accepted()) {
+      known.push_back({index, f.frame_corners[j], f.frame_corners[j], scale[m], MisfitGainScale(index), correction});
+      f.applied_points.emplace_back(index, uv);
+    }
   }
   known_lines.clear();
   for (size_t i = 0; i < line_matches.size() && f.budget > 0; ++i) {

@@ -802,6 +802,8 @@ TEST(VisionOptions, CheckNamesTheBadField) {
       {"corners_on_edges", [](VisionOptions& o) { o.corners_on_edges = 3; }},
       {"corner_window_px", [](VisionOptions& o) { o.corner_window_px = 0; }},
       {"corner_bias_px", [nan](VisionOptions& o) { o.corner_bias_px = nan; }},
+      {"point_bias_gain", [](VisionOptions& o) { o.point_bias_gain = 1.5; }},
+      {"point_bias_weight_px", [nan](VisionOptions& o) { o.point_bias_weight_px = nan; }},
       {"local_fit_px", [](VisionOptions& o) { o.local_fit_px = -1; }},
       {"local_fit_after_lock_s", [nan](VisionOptions& o) { o.local_fit_after_lock_s = nan; }},
       {"tracked_max_innovation_px", [](VisionOptions& o) { o.tracked_max_innovation_px = -1; }},

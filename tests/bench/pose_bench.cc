@@ -85,6 +85,8 @@ struct PoseBenchOptions {
   double gyro_sigma_rad_s = pose::PoseFilterOptions{}.gyro_sigma_rad_s;
   bool gyro_bias = pose::PoseFilterOptions{}.estimate_gyro_bias;  // issue 19: the bias in the state
   double accel_noise_m_s2 = pose::PoseFilterOptions{}.accel_noise_m_s2;  // issue 19, fifteenth session
+  double point_bias_gain = pose::VisionOptions{}.point_bias_gain;
+  double point_bias_weight_px = pose::VisionOptions{}.point_bias_weight_px;
   double angular_accel_noise_rad_s2 = pose::PoseFilterOptions{}.angular_accel_noise_rad_s2;
   double acquisition_sigma_m = pose::VisionOptions{}.acquisition_position_sigma_m;  // issue 19
   double acquisition_sigma_deg = pose::VisionOptions{}.acquisition_orientation_sigma_deg;
@@ -581,6 +583,8 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.corners_on_edges = o.corners_on_edges;
     vo.corner_window_px = o.corner_window_px;
     vo.corner_bias_px = o.corner_bias_px;
+    vo.point_bias_gain = o.point_bias_gain;
+    vo.point_bias_weight_px = o.point_bias_weight_px;
     vo.local_fit_px = o.local_fit_px;
     vo.robust_residual_px = o.robust_residual_px;
     vo.use_lines = o.lines;
@@ -1115,6 +1119,12 @@ Runner AddPoseBench(CLI::App& sub) {
       ->capture_default_str()
       ->check(ave::cli::Range(1e-6, 10.0));
   sub.add_option("--gyro-bias", o->gyro_bias, "estimate the gyro bias in the filter state (issue 19; on since the fifteenth session, docs/POSE.md)")->capture_default_str();
+  sub.add_option("--point-bias-gain", o->point_bias_gain, "learn each known point's persisting misfit from its keyframe residuals at this gain (0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 1.0));
+  sub.add_option("--point-bias-weight", o->point_bias_weight_px, "weigh a point down by its learned misfit: variance x (1 + (misfit / this)^2), px (0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 100.0));
   sub.add_option("--accel-noise", o->accel_noise_m_s2, "white acceleration noise, m/s2/sqrt(Hz) (PoseFilterOptions::accel_noise_m_s2)")
       ->capture_default_str()
       ->check(ave::cli::Range(1e-3, 100.0));
