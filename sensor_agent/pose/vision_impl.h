@@ -163,8 +163,8 @@ struct VisionTracker::Impl {
     const double t = near > 0 ? std::clamp((d - near) / near, 0.0, 1.0) : 1.0;
     const double base = options.feature_point_bias_near_px + t * (options.feature_point_bias_px - options.feature_point_bias_near_px);
     // A point weighed down by its misfit (point_bias_weight_px) keeps the base sigma: its misfit is
-    // then mostly out of the estimate, and as a consider sigma too it over-covered (13 draws: 79.7 %
-    // in band against 82.5 % at a 0.1 px base, docs/BENCHMARKS.md "fifteenth session").
+    // then mostly out of the estimate (13 draws: NEES in band 80.0 %, 79.7 % with the misfit as
+    // its consider sigma too; docs/POSE.md, "The gyro's bias decides the pitch").
     return options.point_bias_weight_px > 0 ? base : std::max(base, LearnedMisfitPx(index));
   }
   // The gain's variance factor of known point `index` from its learned misfit
