@@ -438,6 +438,7 @@ struct VisionFrameStats {
   bool unfit = false;        // a keyframe whose chamfer alignment fitted too badly to apply anything (max_alignment_score_px)
   bool local_fit = false;    // a keyframe that fitted nowhere as a whole, matched only where its features' outline fits (local_fit_px)
   int known_tracked = 0;     // known features followed by KLT into this frame
+  int misfit_weighted = 0;   // keyframe matches at half weight or less for their point's learned misfit (point_bias_weight_px)
   // Why measurements did not update the pose (counted per feature).
   int rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0;
   int rejected_tracked_jump = 0;

@@ -548,6 +548,7 @@ void VisionTracker::Impl::ApplyFineMatches(PoseEkf& ekf, Frame& f, const std::ve
                         MisfitGainScale(index));
     Count(r, f.stats.points_used, f.stats);
     if (r.accepted()) {
+      f.stats.misfit_weighted += MisfitGainScale(index) >= 2;
       known.push_back({index, f.frame_corners[j], f.frame_corners[j], scale[m], MisfitGainScale(index), correction});
       f.applied_points.emplace_back(index, uv);
     }

@@ -426,6 +426,43 @@ TEST_F(VisionTest, WallFeetWeighLessAlongTheirTracksToo) {
   EXPECT_LT(shrink_4, 0.9 * shrink_1) << "shrink at 1x " << shrink_1 << ", at 4x " << shrink_4;
 }
 
+// Issue 19, fifteenth session: point_bias_gain learns each known point's misfit from its post-fit
+// keyframe residuals once the lock holds, and point_bias_weight_px weighs a point down by it. The
+// same frame seen again and again, every frame a keyframe, from the true pose: a corner's detection
+// error is then the same every time, its whole misfit. No point is at half weight before it has
+// three learned residuals; after, those whose corner is found 0.5 px or more off per axis are, and
+// none with the weight off.
+TEST_F(VisionTest, AKnownPointsMisfitIsLearnedAndWeighsItDown) {
+  const scene::CameraSpec& camera = *scenario_->world.FindCamera("backpack");
+  const auto [frame, truth] = BackpackAt4s();
+  auto weighted = [&](double weight_px) {
+    VisionOptions options;
+    options.lock_frames = 1;
+    options.keyframe_interval = 1;
+    options.point_bias_gain = 0.3;
+    options.point_bias_weight_px = weight_px;
+    VisionTracker vision = CampusTracker(camera.intrinsics, options);
+    PoseEkf ekf;
+    ekf.Initialize(0, truth, 0.05, 0.1 * kDeg);
+    std::vector<int> counts;
+    for (int i = 0; i < 8; ++i) {
+      ekf.Predict((i + 1) * 33'333'333);
+      const VisionFrameStats s = vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
+      EXPECT_TRUE(s.keyframe) << i;
+      EXPECT_GT(s.points_used, 5) << i;
+      counts.push_back(s.misfit_weighted);
+    }
+    return std::make_pair(counts, ekf.world_from_camera());
+  };
+  const auto [on, on_pose] = weighted(0.5);
+  const auto [off, off_pose] = weighted(0);
+  for (int i = 0; i < 3; ++i) EXPECT_EQ(on[i], 0) << "keyframe " << i << ": no point has three residuals yet";
+  EXPECT_GT(on.back(), 0);
+  for (int c : off) EXPECT_EQ(c, 0);
+  EXPECT_NE(on_pose.translation, off_pose.translation) << "the weight changes the estimate";
+  EXPECT_LT((on_pose.translation - truth.translation).norm(), 0.3);
+}
+
 // Issue 19, fourteenth session: corner_bias_px moves each known corner's measurement back out of
 // its wedge, by the option's length, on the keyframe and along the KLT track: a wall foot's (its
 // wall above it) down; a wall top's never down, and up where its wall edge below outweighs a roof
