@@ -196,7 +196,7 @@ absl::StatusOr<PointCloud> ReadPcd(const std::string& path, const CloudReadOptio
   for (size_t k = 0; k < n; ++k) {
     const uint8_t* p = blob.data.data() + k * blob.point_step;
     if (builder.Add({FieldValue(p + fx->offset, *fx), FieldValue(p + fy->offset, *fy), FieldValue(p + fz->offset, *fz)}) < 0) continue;
-    if (fi) builder.cloud().intensity.push_back(static_cast<uint16_t>(std::clamp(FieldValue(p + fi->offset, *fi), 0.0, 65535.0)));
+    if (fi) builder.cloud().intensity.push_back(static_cast<uint16_t>(FieldInRange(FieldValue(p + fi->offset, *fi), 65535.0)));
   }
   return builder.Take();
 }

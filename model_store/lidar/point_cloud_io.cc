@@ -124,8 +124,8 @@ absl::StatusOr<PointCloud> ParsePly(std::string_view bytes, const std::string& n
   auto add = [&]() {
     if (builder.Add({values[ix], values[iy], values[iz]}) < 0) return;
     PointCloud& c = builder.cloud();
-    if (ii >= 0) c.intensity.push_back(static_cast<uint16_t>(std::clamp(values[ii], 0.0, 65535.0)));
-    if (ic >= 0) c.classification.push_back(static_cast<uint8_t>(std::clamp(values[ic], 0.0, 255.0)));
+    if (ii >= 0) c.intensity.push_back(static_cast<uint16_t>(FieldInRange(values[ii], 65535.0)));
+    if (ic >= 0) c.classification.push_back(static_cast<uint8_t>(FieldInRange(values[ic], 255.0)));
   };
   size_t at = body + 1;
   if (format == "ascii") {

@@ -36,6 +36,10 @@ absl::StatusOr<PointCloud> ParsePly(std::string_view bytes, const std::string& n
 absl::StatusOr<PointCloud> ReadPcd(const std::string& path, const CloudReadOptions& options = {});
 bool HavePcdSupport();
 
+// A file's intensity or class value as the cloud's integer field: clamped to [0, hi], and 0 where
+// the file says NaN (a cast of NaN to an integer is undefined; the fuzz smoke found a PLY with one).
+inline double FieldInRange(double v, double hi) { return v >= 0 ? (v <= hi ? v : hi) : 0.0; }
+
 // Turns world positions (metres, double) into a cloud under a whole-metre local origin taken
 // from the first finite point; NaN/inf points are dropped and counted. Used by the PLY and PCD
 // readers and by tests that build clouds far from zero.

@@ -28,6 +28,20 @@ TEST(Ply, AsciiRejectsAndCountsNonFinitePoints) {
   EXPECT_EQ(cloud->origin + cloud->xyz[1].cast<double>(), Eigen::Vector3d(7, 8, 9));
 }
 
+// A float intensity or class that is NaN, negative or too large becomes 0 or the field's largest
+// value (the fuzz smoke's finding: NaN cast to an integer is undefined behaviour).
+TEST(Ply, NanAndOutOfRangeIntensitiesAndClassesAreClamped) {
+  const std::string ply =
+      "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+      "property float intensity\nproperty float classification\nend_header\n"
+      "1 2 3 nan nan\n1 2 4 -5 -1\n1 2 5 70000 300\n1 2 6 12.5 6\n";
+  absl::StatusOr<PointCloud> cloud = ParsePly(ply, "c.ply");
+  ASSERT_TRUE(cloud.ok()) << cloud.status();
+  ASSERT_EQ(cloud->size(), 4u);
+  EXPECT_EQ(cloud->intensity, (std::vector<uint16_t>{0, 0, 65535, 12}));
+  EXPECT_EQ(cloud->classification, (std::vector<uint8_t>{0, 0, 255, 6}));
+}
+
 TEST(Ply, BinaryDoublesNear1e7KeepMillimetres) {
   std::string ply = "ply\nformat binary_little_endian 1.0\nelement vertex 2\nproperty double x\nproperty double y\nproperty double z\nend_header\n";
   const double pts[6] = {4512345.678, 12345678.901, 250.004, 4512346.679, 12345679.902, 251.005};
