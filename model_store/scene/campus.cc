@@ -517,27 +517,55 @@ MoverState MoverAt(const SyntheticCampus& campus, const Mover& mover, double t_s
 Rigid3d CameraPoseAt(const SyntheticCampus& campus, const CameraSpec& camera, double t_s) {
   if (!camera.path || camera.path->waypoints_m.size() < 2) return camera.world_from_camera;
   const CameraPath& path = *camera.path;
-  double length = 0;
-  for (size_t i = 0; i + 1 < path.waypoints_m.size(); ++i) length += (path.waypoints_m[i + 1] - path.waypoints_m[i]).norm();
-  if (!(length > 0)) return camera.world_from_camera;
-  // Ping-pong along the polyline: s in [0, 2 length) folds back onto [0, length].
-  double s = std::fmod(path.speed_mps * t_s, 2 * length);
-  if (!std::isfinite(s)) s = 0;
-  if (s < 0) s += 2 * length;
-  const bool returning = s > length;
-  if (returning) s = 2 * length - s;
-  Vector2d p = path.waypoints_m.back(), dir = Vector2d::UnitX();
-  for (size_t i = 0; i + 1 < path.waypoints_m.size(); ++i) {
-    const Vector2d a = path.waypoints_m[i], b = path.waypoints_m[i + 1];
-    const double len = (b - a).norm();
-    if (s <= len || i + 2 == path.waypoints_m.size()) {
-      dir = len > 0 ? Vector2d((b - a) / len) : Vector2d::UnitX();
-      p = a + std::min(s, len) * dir;
-      break;
-    }
-    s -= len;
+  // The walk back and forth as one closed route of length 2 L: the waypoints out, then back.
+  std::vector<Vector2d> route = path.waypoints_m;
+  for (size_t i = path.waypoints_m.size() - 1; i-- > 0;) route.push_back(path.waypoints_m[i]);
+  const size_t legs = route.size() - 1;
+  std::vector<double> start(legs + 1, 0.0), heading(legs, 0.0);
+  for (size_t i = 0; i < legs; ++i) {
+    const Vector2d d = route[i + 1] - route[i];
+    start[i + 1] = start[i] + d.norm();
+    // A zero-length leg keeps the heading before it.
+    heading[i] = d.norm() > 0 ? std::atan2(d.y(), d.x()) : (i > 0 ? heading[i - 1] : 0.0);
   }
-  if (returning) dir = -dir;
+  const double total = start[legs];
+  if (!(total > 0)) return camera.world_from_camera;
+  const double walked = path.speed_mps * t_s;
+  double s = std::fmod(walked, total);
+  if (!std::isfinite(s)) s = 0;
+  if (s < 0) s += total;
+  size_t leg = 0;
+  while (leg + 1 < legs && s > start[leg + 1]) ++leg;
+  const Vector2d a = route[leg], b = route[leg + 1];
+  const double len = start[leg + 1] - start[leg];
+  const Vector2d p = len > 0 ? Vector2d(a + (b - a) * (std::clamp(s - start[leg], 0.0, len) / len)) : a;
+
+  // The heading turns at turn_rate_deg_s through each bend, centred on it: at bend k (the start of
+  // leg k, k = legs being the start of the next walk) the turn is the wrapped heading change, a
+  // turn back (pi) to the left, over an arc of |turn| / rate * speed, halved where a leg is shorter.
+  // The angle follows a smoothstep across the arc, as a person turns: the rate rises from zero to
+  // 1.5 times the mean and back, with no step a gyro could not follow.
+  const double rate = path.turn_rate_deg_s * M_PI / 180;
+  auto smooth = [](double x) { return x * x * (3 - 2 * x); };
+  auto turn_at = [&](size_t k, double& turn, double& half_arc) {
+    const double before = heading[(k + legs - 1) % legs], after = heading[k % legs];
+    turn = std::remainder(after - before, 2 * M_PI);
+    if (std::abs(std::abs(turn) - M_PI) < 1e-9) turn = M_PI;
+    const double leg_before = start[(k + legs - 1) % legs + 1] - start[(k + legs - 1) % legs];
+    const double leg_after = start[k % legs + 1] - start[k % legs];
+    half_arc = std::min({0.5 * std::abs(turn) / rate * path.speed_mps, 0.5 * leg_before, 0.5 * leg_after});
+  };
+  double yaw = heading[leg];
+  if (rate > 0 && std::isfinite(rate)) {
+    double turn = 0, half = 0;
+    turn_at(leg + 1, turn, half);  // the bend ahead
+    const double ahead = start[leg + 1] - s;
+    if (half > 0 && ahead < half) yaw = heading[leg] + turn * smooth(0.5 - 0.5 * ahead / half);
+    turn_at(leg, turn, half);  // the bend behind; the first walk's start is no turn
+    const double behind = s - start[leg];
+    if (half > 0 && behind < half && (leg > 0 || walked >= total)) yaw = heading[leg] - turn * (1 - smooth(0.5 + 0.5 * behind / half));
+  }
+  const Vector2d dir(std::cos(yaw), std::sin(yaw));
   const Vector3d eye(p.x(), p.y(), campus.TerrainHeight(p.x(), p.y()) + path.height_m);
   const double pitch = path.pitch_deg * M_PI / 180;
   const Vector3d forward(std::cos(pitch) * dir.x(), std::cos(pitch) * dir.y(), -std::sin(pitch));

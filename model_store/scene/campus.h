@@ -111,6 +111,11 @@ struct CameraPath {
   double speed_mps = 1.4;
   double height_m = 1.7;
   double pitch_deg = 10;
+  // The carrier turns its heading at this mean rate where the path bends and at its ends (a walker
+  // takes about a second for a street corner, two to turn back), the turn centred on the bend and
+  // smooth (smoothstep: the rate peaks at 1.5 times this mid-turn); the position stays on the
+  // polyline. The start of the first walk is not a turn.
+  double turn_rate_deg_s = 90;
 };
 
 struct CameraSpec {

@@ -65,5 +65,43 @@ TEST(Campus, EveryCameraLooksAtGroundInsideTheSite) {
   }
 }
 
+// A walker's heading turns at the path's mean turn rate, smoothly, through each bend and back at each end, centred
+// on the bend, while its position stays on the polyline; the first walk starts looking along it.
+TEST(Campus, AWalkingCameraTurnsAtItsTurnRateThroughBendsAndEnds) {
+  const SyntheticCampus campus = BuiltinCampus();
+  CameraSpec cam;
+  CameraPath path;
+  path.waypoints_m = {{0, 0}, {0, 10}, {10, 10}};  // a left turn of 90 deg, then 180 deg at the end
+  path.speed_mps = 1.0;
+  path.pitch_deg = 0;
+  path.turn_rate_deg_s = 90;
+  cam.path = path;
+  auto yaw_at = [&](double t) {
+    const Eigen::Vector3d f = CameraPoseAt(campus, cam, t).rotation * Eigen::Vector3d::UnitZ();
+    return std::atan2(f.y(), f.x());
+  };
+  EXPECT_NEAR(yaw_at(0), M_PI / 2, 1e-12);   // along the first leg from the start
+  EXPECT_NEAR(yaw_at(9.4), M_PI / 2, 1e-12);  // before the bend's turn (half of 1 s)
+  EXPECT_NEAR(yaw_at(10), M_PI / 4, 1e-12);   // half turned at the bend
+  EXPECT_NEAR(yaw_at(10.6), 0, 1e-12);        // along the second leg after it
+  EXPECT_NEAR(yaw_at(20), M_PI / 2, 1e-12);   // the 180 deg turn back, half done at the end (left)
+  EXPECT_NEAR(std::abs(yaw_at(21.1)), M_PI, 1e-12);  // walking back
+  const double rate = 90 * M_PI / 180, dt = 1e-3;
+  double most = 0;
+  Eigen::Quaterniond before = CameraPoseAt(campus, cam, 0).rotation;
+  for (double t = dt; t < 45; t += dt) {  // past the start of the second walk (a turn now)
+    const Rigid3d pose = CameraPoseAt(campus, cam, t);
+    most = std::max(most, before.angularDistance(pose.rotation) / dt);
+    before = pose.rotation;
+    // The position is on the polyline, walked at the speed.
+    const double s = std::fmod(t, 40.0), along = s < 20 ? s : 40 - s;
+    const Eigen::Vector2d expected = along < 10 ? Eigen::Vector2d(0, along) : Eigen::Vector2d(along - 10, 10);
+    ASSERT_LT((pose.translation.head<2>() - expected).norm(), 1e-9) << "t " << t;
+  }
+  EXPECT_LT(most, 1.5 * rate * 1.001);  // a smoothstep's peak: 1.5 times the mean rate
+  EXPECT_GT(most, 1.5 * rate * 0.95);
+  EXPECT_NEAR(yaw_at(40), 0, 1e-9);  // half way through turning back (left, from south to north) at the start
+}
+
 }  // namespace
 }  // namespace ave::scene

@@ -380,12 +380,13 @@ CameraSpec ParseCamera(const Map& m, const SyntheticCampus& campus, size_t index
   if (m.Has("path")) {
     if (m.Has("position") || m.Has("look_at")) Fail(m.Get("path"), m.Field("path"), "a camera has either a path or position + look_at, not both");
     const Map p(m.Get("path"), m.Field("path"));
-    p.AllowOnly({"waypoints", "speed_mps", "height_m", "pitch_deg"});
+    p.AllowOnly({"waypoints", "speed_mps", "height_m", "pitch_deg", "turn_rate_deg_s"});
     CameraPath path;
     path.waypoints_m = p.Points("waypoints", 2);
     path.speed_mps = p.PositiveUpTo("speed_mps", path.speed_mps, 100);
     path.height_m = p.NumberIn("height_m", path.height_m, 0.1, 500);
     path.pitch_deg = p.NumberIn("pitch_deg", path.pitch_deg, -89, 89);
+    path.turn_rate_deg_s = p.PositiveUpTo("turn_rate_deg_s", path.turn_rate_deg_s, 36000);
     double length = 0;
     for (size_t i = 0; i + 1 < path.waypoints_m.size(); ++i) length += (path.waypoints_m[i + 1] - path.waypoints_m[i]).norm();
     if (!(length > 0)) Fail(p.Get("waypoints"), p.Field("waypoints"), "has zero length");

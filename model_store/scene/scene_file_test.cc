@@ -268,6 +268,8 @@ TEST(SceneFileBadInput, EmptyPathsAreRejected) {
   EXPECT_EQ(Rejection("name: t\npeople:\n  - {path: []}\n"), "bad.yaml:3: people[0].path: is empty; needs at least 1 points [x, y]");
   EXPECT_THAT(Rejection("name: t\ncameras:\n  - id: w\n    path: {waypoints: []}\n"),
               StartsWith("bad.yaml:4: cameras[0].path.waypoints: is empty"));
+  EXPECT_THAT(Rejection("name: t\ncameras:\n  - id: w\n    path: {waypoints: [[0, 0], [5, 0]], turn_rate_deg_s: 0}\n"),
+              StartsWith("bad.yaml:4: cameras[0].path.turn_rate_deg_s: must be > 0"));
 }
 
 TEST(SceneFileBadInput, OtherMistakesNameTheirField) {

@@ -84,7 +84,7 @@ TEST(GpsImu, GyroFromTheFirstSampleIntegratesToTheTruth) {
 
 TEST(GpsImu, GyroIntegratesToTheTrueOrientationChangeThroughTurns) {
   const scene::SyntheticCampus site = testing::CourtyardSite();
-  // 60 s: two corners and the ping-pong reversal at the path's end (a 180° turn within a sample).
+  // 60 s: two corners and the ping-pong reversal at the path's end (turned at the path's 90°/s).
   const GpsImuStreams s = SimulateGpsImu(site, Backpack(site), Spec(60), EffectSet{}, 1);
   const double dt = 1.0 / 150;
   double max_rate = 0;
