@@ -68,7 +68,13 @@ struct PoseFilterOptions {
   // white: readings closer together than this are not independent, so each is weighted as
   // dt / orientation_correlation_s of one (sigma inflated by sqrt(correlation / dt)). 0: white.
   // Without it, 150 readings a second make the filter ~12x overconfident in its orientation.
-  double orientation_correlation_s = 1.0;
+  // 20 s since issue 19's sixteenth session (1 s before): an AHRS's drift is pulled back by
+  // gravity and north over tens of seconds (the simulator's gyro_drift: 20 s), and a magnetic
+  // disturbance lasts as long as the building beside it. At 1 s the AHRS dragged a pose whose
+  // vision had nothing to see to its own error within seconds (campus backpack, 59-65 s: 6 deg
+  // of yaw and roll), and 2 of 3 draws of the 75 s walk then relocked 20 px off; at 20 s the pose
+  // drifts 1.5 deg and relocks at once (docs/POSE.md, "The whole walk").
+  double orientation_correlation_s = 20.0;
   // White gyro rate noise (rad/s; the simulator's imu_noise is 0.002, 0.02 kept from before issue
   // 19). The bias is a state of its own when estimate_gyro_bias is on (below), not noise.
   double gyro_sigma_rad_s = 0.02;

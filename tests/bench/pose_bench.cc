@@ -59,7 +59,7 @@ struct PoseBenchOptions {
   std::vector<std::string> rows;  // run only these rows (JSON keys); empty: all
   std::string png = "pose_bench.png";
   bool lines = true, new_points = true;
-  double ahrs_correlation_s = 1.0;  // PoseFilterOptions::orientation_correlation_s
+  double ahrs_correlation_s = pose::PoseFilterOptions{}.orientation_correlation_s;
   double gps_correlation_s = pose::PoseFilterOptions{}.gps_correlation_s;  // issue 19 (pose19e)
   double gps_min_sigma_m = pose::PoseFilterOptions{}.gps_min_sigma_m;
   double gate_chi2_2dof = pose::PoseFilterOptions{}.gate_chi2_2dof;  // issue 19, seventh session
@@ -81,6 +81,7 @@ struct PoseBenchOptions {
   double relocalize_max_score_px = pose::VisionOptions{}.relocalize_max_score_px;  // issue 19, eleventh session
   int relocalize_retry_frames = pose::VisionOptions{}.relocalize_retry_frames;
   double gyro_correlation_s = pose::PoseFilterOptions{}.gyro_correlation_s;  // issue 19
+  double ahrs_sigma_deg = pose::PoseFilterOptions{}.orientation_sigma_deg;
   double acquiring_sigma_px = pose::VisionOptions{}.acquiring_sigma_px;  // issue 19
   double gyro_sigma_rad_s = pose::PoseFilterOptions{}.gyro_sigma_rad_s;
   bool gyro_bias = pose::PoseFilterOptions{}.estimate_gyro_bias;  // issue 19: the bias in the state
@@ -154,6 +155,7 @@ struct Row {
   std::string key;           // JSON key
   std::vector<double> errors_px;         // every visible model point of every frame
   std::vector<double> frame_median_px;   // per frame, for the plot
+  std::vector<size_t> frame_errors_end;  // per frame, errors_px.size() after it (a window's slice)
   std::vector<double> frame_ms;          // per frame, CPU ms (filter + vision)
   double filter_ms = 0, detect_ms = 0, update_ms = 0, used = 0;
   int frames = 0;
@@ -536,6 +538,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     pose::PoseFilterOptions fo;
     fo.orientation_correlation_s = o.ahrs_correlation_s;
     fo.gyro_correlation_s = o.gyro_correlation_s;
+    fo.orientation_sigma_deg = o.ahrs_sigma_deg;
     fo.gps_correlation_s = o.gps_correlation_s;
     fo.gps_min_sigma_m = o.gps_min_sigma_m;
     fo.gate_chi2_2dof = o.gate_chi2_2dof;
@@ -717,6 +720,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
       row.frame_ms.push_back(frame_ms);
       const pose::PoseSample current = tracker.Current();
       Misregistration(k, frame_truth, current.world_from_camera, seen, row.errors_px, &row.frame_median_px);
+      row.frame_errors_end.push_back(row.errors_px.size());
       const double nees = PoseNees(frame_truth, current);
       if (nees_csv) {
         // Errors truth - estimate, position (world, m) and rotation vector in the *camera* frame
@@ -906,6 +910,28 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     }
     std::printf("| %s | matches beyond 3 px | | %d of %d | %.1f %% | |\n", RowName(r).c_str(), r.matches_beyond_3px, r.matches,
                 100.0 * r.matches_beyond_3px / std::max(1, r.matches));
+  }
+  // A long run (the whole walk, issue 19's sixteenth session) by 10 s windows: where the lock
+  // holds, where the view has no model point, where the NEES leaves the band.
+  if (o.seconds >= 20) {
+    std::printf("\nthe run by 10 s windows (scene time from --start): misregistration median px (p95), frames with no model point in view, NEES in the 95 %% band:\n");
+    std::printf("| mode | window | median px (p95) | no point in view | NEES in band |\n| --- | --- | ---: | ---: | ---: |\n");
+    for (const Row& r : rows) {
+      if (!r.knob.empty() || r.event || r.frame_errors_end.empty()) continue;
+      const size_t frames = r.frame_errors_end.size();
+      for (size_t w0 = 0; w0 < frames; w0 += 300) {
+        const size_t w1 = std::min(frames, w0 + 300);
+        const size_t e0 = w0 == 0 ? 0 : r.frame_errors_end[w0 - 1], e1 = r.frame_errors_end[w1 - 1];
+        const Spread spread = SpreadOf(std::vector<double>(r.errors_px.begin() + static_cast<std::ptrdiff_t>(e0), r.errors_px.begin() + static_cast<std::ptrdiff_t>(e1)));
+        int blind = 0, in_band = 0, scored = 0;
+        for (size_t f = w0; f < w1; ++f) {
+          blind += r.frame_errors_end[f] == (f == 0 ? 0 : r.frame_errors_end[f - 1]);
+          if (f < r.nees_at_frame.size() && std::isfinite(r.nees_at_frame[f])) ++scored, in_band += r.nees_at_frame[f] >= kNeesLow && r.nees_at_frame[f] <= kNeesHigh;
+        }
+        std::printf("| %s | %.0f-%.0f s | %.2f (%.2f) | %.0f %% | %s |\n", RowName(r).c_str(), o.start_s + w0 / 30.0, o.start_s + w1 / 30.0, spread.median, spread.p95,
+                    100.0 * blind / static_cast<double>(w1 - w0), scored ? (std::to_string(static_cast<int>(std::lround(100.0 * in_band / scored))) + " %").c_str() : "-");
+      }
+    }
   }
   std::printf("\nscenario variants, misregistration median px (p95) in the windows around the event:\n| variant | 1 s before | during | 1 s after |\n| --- | ---: | ---: | ---: |\n");
   for (const Row& r : rows) {
@@ -1207,6 +1233,9 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--acquisition-sigma-deg", o->acquisition_sigma_deg, "orientation sigma added before the first vision frame (issue 19; 0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 90.0));
+  sub.add_option("--ahrs-sigma", o->ahrs_sigma_deg, "AHRS orientation sigma, deg (PoseFilterOptions::orientation_sigma_deg)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.01, 90.0));
   sub.add_option("--gyro-correlation", o->gyro_correlation_s, "seconds over which gyro errors (bias) are correlated (0: white, before issue 19's NEES fix)")
       ->capture_default_str()
       ->check(ave::cli::Range(0, 1e6));
