@@ -401,11 +401,24 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
   if (o.pixel_area >= 1) camera_effects.Enable(sim::EffectKind::kPixelArea, sim::EffectParams{{{"samples", double(o.pixel_area)}}});
   const sim::SimulatedCamera sim_camera(world, *camera, camera_effects, scenario->seed);
   const int n = static_cast<int>(std::floor(o.seconds * 30 + 1e-9)) + 1;
+  // Every frame is kept for the modes to share: its colour, class and depth (8 bytes a pixel; the
+  // object ids and the JPEG are dropped). A run longer than the free memory holds is refused here,
+  // not killed by the kernel minutes later (120 s at 640x480: ~9 GB).
+  const double frame_bytes = 8.0 * camera->intrinsics.width * camera->intrinsics.height;
+  const double free_bytes = static_cast<double>(sysconf(_SC_AVPHYS_PAGES)) * static_cast<double>(sysconf(_SC_PAGESIZE));
+  if (free_bytes > 0 && n * frame_bytes > 0.8 * free_bytes) {
+    std::fprintf(stderr, "ave-bench pose: --seconds %g keeps %d frames, about %.1f GB, and %.1f GB of memory are free: run fewer seconds (--start picks where)\n",
+                 o.seconds, n, n * frame_bytes / 1e9, free_bytes / 1e9);
+    return 2;
+  }
   std::vector<sim::SimImage> frames;
+  frames.reserve(static_cast<size_t>(n));
   std::vector<Rigid3d> truth;
   const WallClock::time_point render_start = WallClock::now();
   for (int f = 0; f < n; ++f) {
     frames.push_back(sim_camera.Frame(f, o.start_s + f / 30.0));
+    std::vector<uint32_t>().swap(frames.back().object_id);
+    std::vector<uint8_t>().swap(frames.back().jpeg);
     truth.push_back(sim_camera.PoseAt(o.start_s + f / 30.0));
     if (o.footage_jpeg_quality > 0) {
       const std::vector<uint8_t> jpeg = sim::EncodeFrameJpeg(frames.back(), o.footage_jpeg_quality);
