@@ -101,6 +101,26 @@ TEST(Campus, AWalkingCameraTurnsAtItsTurnRateThroughBendsAndEnds) {
   EXPECT_LT(most, 1.5 * rate * 1.001);  // a smoothstep's peak: 1.5 times the mean rate
   EXPECT_GT(most, 1.5 * rate * 0.95);
   EXPECT_NEAR(yaw_at(40), 0, 1e-9);  // half way through turning back (left, from south to north) at the start
+  // Hard cases: far and negative times, a repeated waypoint (a zero-length leg), a U-turn in the
+  // middle of the path, a tiny and a huge turn rate: every pose finite and unit.
+  for (double t : {-1e3, 1e7, 1e12}) {
+    const Rigid3d pose = CameraPoseAt(campus, cam, t);
+    EXPECT_TRUE(pose.translation.allFinite() && pose.rotation.coeffs().allFinite()) << t;
+    EXPECT_NEAR(pose.rotation.norm(), 1, 1e-9) << t;
+  }
+  for (const std::vector<Eigen::Vector2d>& waypoints : std::vector<std::vector<Eigen::Vector2d>>{
+           {{0, 0}, {0, 10}, {0, 10}, {10, 10}}, {{0, 0}, {0, 10}, {0, 2}}, {{0, 0}, {0, 1e-9}, {5, 5}}}) {
+    for (double rate : {1e-3, 90.0, 36000.0}) {
+      CameraSpec odd = cam;
+      odd.path->waypoints_m = waypoints;
+      odd.path->turn_rate_deg_s = rate;
+      for (double t = 0; t < 60; t += 0.05) {
+        const Rigid3d pose = CameraPoseAt(campus, odd, t);
+        ASSERT_TRUE(pose.translation.allFinite() && pose.rotation.coeffs().allFinite()) << t << " rate " << rate;
+        ASSERT_NEAR(pose.rotation.norm(), 1, 1e-9) << t;
+      }
+    }
+  }
 }
 
 }  // namespace
