@@ -71,6 +71,9 @@ std::string VisionOptions::Check() const {
   if (!(join_model_depth_tolerance >= 0 && std::isfinite(join_model_depth_tolerance))) return "join_model_depth_tolerance must be finite and >= 0";
   if (!(weak_lock_gated_share >= 0 && weak_lock_gated_share <= 1)) return "weak_lock_gated_share must be in [0, 1]";
   if (!(lock_sigma_px > 0)) return "lock_sigma_px must be > 0";
+  if (!(locked_search_sigmas >= 0 && std::isfinite(locked_search_sigmas)) || !(locked_search_floor_px >= 0 && std::isfinite(locked_search_floor_px)))
+    return "locked_search_sigmas and locked_search_floor_px must be finite and >= 0";
+  if (!(line_ambiguity_ratio >= 0 && line_ambiguity_ratio <= 1)) return "line_ambiguity_ratio must be in [0, 1]";
   if (!(visibility_cache_m >= 0)) return "visibility_cache_m must be >= 0";
   if (!(nis_short_gain >= 0 && nis_short_gain <= 1 && nis_long_gain > 0 && nis_long_gain <= 1)) {
     return "nis_short_gain must be in [0, 1] and nis_long_gain in (0, 1]";
@@ -449,16 +452,37 @@ bool VisionTracker::Impl::WeakLock(const PoseEkf& ekf, const Frame& f) const {
   double pose_sigma_px = 0;  // the pose's own projected uncertainty, summed over the tracks
   const double var = ekf.options().pixel_sigma_px * ekf.options().pixel_sigma_px;
   for (size_t i = 0; i < known.size(); ++i) {
-    Eigen::Matrix<double, 2, kErrorDim> J;
-    const std::optional<Eigen::Vector2d> h = ekf.ProjectPoint(k, map.points[known[i].index], &J);
-    const Eigen::Matrix2d JPJ = J * ekf.covariance() * J.transpose();
+    Eigen::Matrix2d JPJ;
+    std::optional<Eigen::Vector2d> h;
+    pose_sigma_px += ProjectedSigmaPx(ekf, known[i].index, &JPJ, &h);
     const Eigen::Matrix2d S = JPJ + var * Eigen::Matrix2d::Identity();
     const Eigen::Vector2d r = h ? Eigen::Vector2d(f.known_uv[i] - *h) : Eigen::Vector2d::Constant(1e9);
     gated += !(r.dot(S.ldlt().solve(r)) <= ekf.options().gate_chi2_2dof);
-    pose_sigma_px += std::sqrt(std::max(0.0, 0.5 * JPJ.trace()));
   }
   const int n = static_cast<int>(known.size());
   return n < options.min_tracked_known || gated > options.weak_lock_gated_share * n || pose_sigma_px > options.lock_sigma_px * n;
+}
+
+double VisionTracker::Impl::ProjectedSigmaPx(const PoseEkf& ekf, int index, Eigen::Matrix2d* jpj, std::optional<Eigen::Vector2d>* uv) const {
+  Eigen::Matrix<double, 2, kErrorDim> J;
+  const std::optional<Eigen::Vector2d> h = ekf.ProjectPoint(k, map.points[index], &J);
+  const Eigen::Matrix2d JPJ = h ? Eigen::Matrix2d(J * ekf.covariance() * J.transpose()) : Eigen::Matrix2d::Zero();
+  if (jpj) *jpj = JPJ;
+  if (uv) *uv = h;
+  return std::sqrt(std::max(0.0, 0.5 * JPJ.trace()));
+}
+
+// While the lock holds, a shift the pose's uncertainty cannot explain is the outline laid on
+// something else: the search reaches locked_search_sigmas times the mean projected sigma at the
+// predicted points, plus locked_search_floor_px (the prediction's ordinary error between keyframes).
+double VisionTracker::Impl::AlignmentSearchRadius(const PoseEkf& ekf, const Frame& f) const {
+  // Since the lock first held and until the pose is declared lost: keyframes with too few matches
+  // to count as good ones (82.5 s of the walk: 2-5 points) are when the bound matters most.
+  if (!locked_once || !(options.locked_search_sigmas > 0) || f.predicted.empty()) return options.search_radius_px;
+  double sum = 0;
+  for (const auto& [index, uv] : f.predicted) sum += ProjectedSigmaPx(ekf, index);
+  const double bound = options.locked_search_sigmas * sum / static_cast<double>(f.predicted.size()) + options.locked_search_floor_px;
+  return std::min(options.search_radius_px, bound);
 }
 
 // 3a. Tracked known features update the filter; a rejected one is dropped.

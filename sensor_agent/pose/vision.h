@@ -56,6 +56,18 @@ struct VisionOptions {
   int max_features = 50;          // features used per frame (known points, then lines, then new points)
   double search_radius_px = 60;   // window around each prediction for the first (coarse) match
   double match_radius_px = 3;     // window after the coarse pass
+  // Issue 19 (seventeenth session): once the lock has held, the coarse alignment searches only as far
+  // as the filter's pose can be off: this many times its projected sigma at the predicted points,
+  // plus locked_search_floor_px, at most search_radius_px. A shift beyond that is the model's
+  // outline laid on something else (a lens occluder's edge, a person close by): on the walk at
+  // 82.5 s it moved the image 20-60 px while the pose was 0.1 m right, and the pose slid 10 m.
+  // 0: the full search_radius_px on every keyframe.
+  double locked_search_sigmas = 4;
+  // Issue 19 (seventeenth session): an image segment that two model lines' predictions both reach
+  // goes to the nearer only when its distance is at most this times the other's; else to neither.
+  // 0: to neither.
+  double line_ambiguity_ratio = 0.5;
+  double locked_search_floor_px = 8;
   bool use_lines = true;
   // Issue 19 (moonshot): the Fast Line Detector, its matched segments refined to sub-pixel, costs a
   // sixth of LSD (0.29 against 1.96 ms a frame) at the same accuracy (docs/BENCHMARKS.md, "Fast Line Detector").
@@ -442,6 +454,7 @@ struct VisionFrameStats {
   // Why measurements did not update the pose (counted per feature).
   int rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0;
   int rejected_tracked_jump = 0;
+  int rejected_ambiguous = 0;  // keyframe lines left unmatched: their segment was nearly as near another model line's image (line_ambiguity_ratio)
   int rejected_structure = 0;  // keyframe corners refused: their model edges not found (VisionOptions::corners_on_edges 2)
   bool height_applied = false;  // the carried camera's height above the ground was applied (carrier_height_m)  // tracked known features beyond tracked_max_innovation_px of the prediction
   int klt_lost = 0;          // tracks KLT lost (status 0 or left the image)
@@ -462,6 +475,13 @@ struct VisionFrameStats {
   std::vector<std::pair<int64_t, Eigen::Vector2d>> unknown_tracks;
   // The fine pass's known-point matches (model point, detected pixel), e.g. for a PnP peer.
   std::vector<std::pair<Eigen::Vector3d, Eigen::Vector2d>> point_matches;
+  // The keyframe's applied known-line matches: the model segment's end points and the image
+  // segment's (ideal pixels), e.g. to check them against the truth.
+  struct LineMatch {
+    Eigen::Vector3d a, b;
+    Eigen::Vector2d image_a, image_b;
+  };
+  std::vector<LineMatch> line_matches;
   int features_used() const { return points_used + lines_used + new_points_used; }
 };
 

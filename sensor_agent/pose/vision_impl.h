@@ -264,7 +264,13 @@ struct VisionTracker::Impl {
   // `predicted` without the points left out by LocalFit.
   void DropUnfit(const Frame& f, std::vector<std::pair<int, Eigen::Vector2d>>& predicted) const;
   // The longest detected segment along the predicted image of a line feature.
-  std::optional<Segment> MatchLine(const PoseEkf& ekf, const LineFeature& f, const std::vector<Segment>& segments) const;
+  struct LineCandidate {
+    int segment = -1;
+    double distance_px = 0;  // mean distance of the segment's ends from the predicted line
+  };
+  std::optional<LineCandidate> MatchLine(const PoseEkf& ekf, const LineFeature& f, const std::vector<Segment>& segments) const;
+  // Each image segment to one model line at most (VisionOptions::line_ambiguity_ratio).
+  void ResolveSharedSegments(std::vector<std::optional<LineCandidate>>& candidates, Frame& f) const;
   // A Fast Line Detector segment moved onto the sub-pixel intensity step along it.
   Segment RefineSegment(const cv::Mat& gray, const Segment& s) const;
 
@@ -291,6 +297,11 @@ struct VisionTracker::Impl {
   void DecideKeyframe(const PoseEkf& ekf, Frame& f);
   void RefineTrackedKnown(Frame& f);
   bool WeakLock(const PoseEkf& ekf, const Frame& f) const;
+  // The pose's own uncertainty projected at model point `index`, px: sqrt(trace(J P J') / 2); 0 behind the camera.
+  double ProjectedSigmaPx(const PoseEkf& ekf, int index, Eigen::Matrix2d* jpj = nullptr, std::optional<Eigen::Vector2d>* uv = nullptr) const;
+  // The coarse alignment's search radius: search_radius_px while acquiring, else bounded by the
+  // pose's projected sigma at the predicted points (VisionOptions::locked_search_sigmas).
+  double AlignmentSearchRadius(const PoseEkf& ekf, const Frame& f) const;
   // 3a. Between keyframes: the tracked known features update the filter (vision.cc).
   void UpdateTrackedPoints(PoseEkf& ekf, Frame& f);
   void UpdateTrackedLines(PoseEkf& ekf, Frame& f);
