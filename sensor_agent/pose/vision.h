@@ -60,14 +60,15 @@ struct VisionOptions {
   // as the filter's pose can be off: this many times its projected sigma at the predicted points,
   // plus locked_search_floor_px, at most search_radius_px. A shift beyond that is the model's
   // outline laid on something else (a lens occluder's edge, a person close by): on the walk at
-  // 82.5 s it moved the image 20-60 px while the pose was 0.1 m right, and the pose slid 10 m.
-  // 0: the full search_radius_px on every keyframe.
+  // 82.5 s it moved the image 20-60 px while the pose was 0.1 m right. Acquisition and the search
+  // after a declared loss keep the full radius. 0: the full search_radius_px on every keyframe.
   double locked_search_sigmas = 4;
+  double locked_search_floor_px = 8;
   // Issue 19 (seventeenth session): an image segment that two model lines' predictions both reach
-  // goes to the nearer only when its distance is at most this times the other's; else to neither.
+  // goes to the nearer only when its distance is at most this times the other's; else to neither
+  // (a near line's image 4 px from a far one's took the far one's edge on the walk at 82.5 s).
   // 0: to neither.
   double line_ambiguity_ratio = 0.5;
-  double locked_search_floor_px = 8;
   bool use_lines = true;
   // Issue 19 (moonshot): the Fast Line Detector, its matched segments refined to sub-pixel, costs a
   // sixth of LSD (0.29 against 1.96 ms a frame) at the same accuracy (docs/BENCHMARKS.md, "Fast Line Detector").
