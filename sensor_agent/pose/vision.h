@@ -65,7 +65,7 @@ struct VisionOptions {
   double locked_search_sigmas = 4;
   double locked_search_floor_px = 8;
   // Issue 19 (seventeenth session): an image segment that two model lines' predictions both reach
-  // goes to the nearer only when its distance is at most this times the other's; else to neither
+  // goes to the nearer only when its distance is under this times the other's; else to neither
   // (a near line's image 4 px from a far one's took the far one's edge on the walk at 82.5 s).
   // 0: to neither.
   double line_ambiguity_ratio = 0.5;

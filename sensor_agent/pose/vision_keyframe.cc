@@ -177,8 +177,8 @@ void VisionTracker::Impl::ResolveSharedSegments(std::vector<std::optional<LineCa
   for (auto& [segment, lines] : claims) {
     if (lines.size() < 2) continue;
     std::sort(lines.begin(), lines.end(), [&](size_t a, size_t b) { return candidates[a]->distance_px < candidates[b]->distance_px; });
-    const bool clear = options.line_ambiguity_ratio > 0 &&
-                       candidates[lines[0]]->distance_px <= options.line_ambiguity_ratio * candidates[lines[1]]->distance_px;
+    // Strictly nearer: two lines whose images coincide (both at distance 0) are a tie, not a choice.
+    const bool clear = candidates[lines[0]]->distance_px < options.line_ambiguity_ratio * candidates[lines[1]]->distance_px;
     for (size_t j = clear ? 1 : 0; j < lines.size(); ++j) {
       candidates[lines[j]].reset();
       ++f.stats.rejected_ambiguous;

@@ -93,5 +93,25 @@ TEST(VisionLines, ASegmentNeitherLineIsClearlyNearerToGoesToNeither) {
   EXPECT_EQ(k.stats.rejected_ambiguous, 2);
 }
 
+// Degenerate: two model lines whose images coincide (one 50 m away, one on the same rays at 35 m)
+// lie on the segment at the same distance: a tie, so the segment goes to neither, and nothing
+// becomes NaN. (The comparison is strict so that an exact tie at distance 0 is refused too; the
+// detected edge here sits a fraction of a pixel off, so this frame does not reach that case.)
+TEST(VisionLines, TwoLinesWithTheSameImageGoToNeither) {
+  FeatureMap map;
+  map.lines.push_back(Line(At(160, 199.5, 50), At(480, 199.5, 50)));
+  map.lines.push_back(Line(At(160, 199.5, 35), At(480, 199.5, 35)));
+  VisionOptions options;
+  options.relocalize_extent_m = 0;
+  VisionTracker vision(map, TriangleMesh{}, Camera(), options);
+  PoseEkf ekf;
+  ekf.Initialize(0, Rigid3d(), 0.05, 0.05 * kDeg);
+  cv::Mat frame = Frame();
+  const VisionFrameStats s = vision.Update(frame.data, frame.cols, frame.rows, ekf);
+  EXPECT_TRUE(s.line_matches.empty());
+  EXPECT_EQ(s.rejected_ambiguous, 2);
+  EXPECT_TRUE(ekf.covariance().allFinite());
+}
+
 }  // namespace
 }  // namespace ave::pose
