@@ -42,10 +42,16 @@ std::string PoseFilterOptions::Check() const {
   if (!positive(angular_accel_noise_rad_s2)) return "angular_accel_noise_rad_s2 must be finite and > 0";
   if (!positive(gps_min_sigma_m)) return "gps_min_sigma_m must be finite and > 0";
   if (!positive(orientation_sigma_deg)) return "orientation_sigma_deg must be finite and > 0";
+  if (!(std::isfinite(heading_sigma_deg) && heading_sigma_deg >= 0)) return "heading_sigma_deg must be finite and >= 0";
   if (!(std::isfinite(orientation_correlation_s) && orientation_correlation_s >= 0)) return "orientation_correlation_s must be finite and >= 0";
   if (!(std::isfinite(gyro_correlation_s) && gyro_correlation_s >= 0)) return "gyro_correlation_s must be finite and >= 0";
   if (!(std::isfinite(gps_correlation_s) && gps_correlation_s >= 0)) return "gps_correlation_s must be finite and >= 0";
   if (!(std::isfinite(gps_bias_sigma_m) && gps_bias_sigma_m >= 0)) return "gps_bias_sigma_m must be finite and >= 0";
+  if (!(std::isfinite(gravity_window_s) && gravity_window_s >= 0)) return "gravity_window_s must be finite and >= 0";
+  if (!positive(gravity_sigma_deg)) return "gravity_sigma_deg must be finite and > 0";
+  if (!(std::isfinite(gravity_correlation_s) && gravity_correlation_s >= 0)) return "gravity_correlation_s must be finite and >= 0";
+  if (!positive(gravity_tolerance_m_s2)) return "gravity_tolerance_m_s2 must be finite and > 0";
+  if (!positive(gravity_max_rate_rad_s)) return "gravity_max_rate_rad_s must be finite and > 0";
   if (!positive(gyro_sigma_rad_s)) return "gyro_sigma_rad_s must be finite and > 0";
   if (!positive(gyro_bias_sigma_rad_s)) return "gyro_bias_sigma_rad_s must be finite and > 0";
   if (!(std::isfinite(gyro_bias_random_walk_rad_s_sqrt_s) && gyro_bias_random_walk_rad_s_sqrt_s >= 0)) {
@@ -72,7 +78,7 @@ const char* RejectionName(Rejection r) {
 PoseEkf::PoseEkf(PoseFilterOptions options) : options_(options) {}
 
 void PoseEkf::Initialize(int64_t t_ns, const Rigid3d& world_from_camera, double position_sigma_m, double orientation_sigma_rad,
-                         bool position_from_gps_fix) {
+                         bool position_from_gps_fix, double heading_sigma_rad) {
   t_ns_ = t_ns;
   p_ = world_from_camera.translation;
   q_ = world_from_camera.rotation.normalized();
@@ -85,6 +91,7 @@ void PoseEkf::Initialize(int64_t t_ns, const Rigid3d& world_from_camera, double 
   StateVector sigma;
   sigma << Eigen::Vector3d::Constant(position_sigma_m), Eigen::Vector3d::Constant(1.0),
       Eigen::Vector3d::Constant(orientation_sigma_rad), Eigen::Vector3d::Constant(0.5), Eigen::Vector3d::Constant(bias_sigma);
+  if (heading_sigma_rad > 0 && std::isfinite(heading_sigma_rad)) sigma(kRot + 2) = heading_sigma_rad;
   P_ = sigma.cwiseAbs2().asDiagonal();
   reported_scale_ = 1;
   // A position taken from a fix carries the fix's bias: error = truth - fix = -(noise + bias).
@@ -265,6 +272,20 @@ void PoseEkf::MovePosition(const Eigen::Vector3d& position, double sigma_m) {
   if (cross_.cols() > 0) cross_.block(kPos, 0, 3, cross_.cols()).setZero();
   gps_bias_sensitivity_.block<3, 3>(kPos, 0).setZero();
   if (bias_sensitivity_.cols() > 0) bias_sensitivity_.block(kPos, 0, 3, bias_sensitivity_.cols()).setZero();
+}
+
+void PoseEkf::MoveOrientation(const Eigen::Quaterniond& world_from_camera, double sigma_rad) {
+  if (!initialized_ || !world_from_camera.coeffs().allFinite() || std::abs(world_from_camera.norm() - 1) > 1e-6 || !std::isfinite(sigma_rad) ||
+      !(sigma_rad > 0)) {
+    return;
+  }
+  q_ = world_from_camera.normalized();
+  P_.block<3, kErrorDim>(kRot, 0).setZero();
+  P_.block<kErrorDim, 3>(0, kRot).setZero();
+  P_.block<3, 3>(kRot, kRot) = Eigen::Matrix3d::Identity() * (sigma_rad * sigma_rad);
+  if (cross_.cols() > 0) cross_.block(kRot, 0, 3, cross_.cols()).setZero();
+  gps_bias_sensitivity_.block<3, 3>(kRot, 0).setZero();
+  if (bias_sensitivity_.cols() > 0) bias_sensitivity_.block(kRot, 0, 3, bias_sensitivity_.cols()).setZero();
 }
 
 void PoseEkf::SetConsideredOrientation(const Eigen::Matrix3d& covariance) {
@@ -453,14 +474,25 @@ UpdateResult PoseEkf::UpdateHeight(double z_m, double sigma_m) {
   return Correct<1>(Eigen::Matrix<double, 1, 1>(z_m - p_.z()), H, Eigen::Matrix<double, 1, 1>(sigma_m * sigma_m), options_.gate_chi2_1dof);
 }
 
-UpdateResult PoseEkf::UpdateOrientation(const Eigen::Quaterniond& world_from_camera, double sigma_rad) {
+UpdateResult PoseEkf::UpdateOrientation(const Eigen::Quaterniond& world_from_camera, double sigma_rad, double heading_sigma_rad) {
   if (!world_from_camera.coeffs().allFinite() || world_from_camera.norm() < 1e-6) return {Rejection::kNotFinite, 0};
   // Measured = Exp(dtheta) * q  =>  innovation = Log(measured * q^-1), world frame.
   const Eigen::Vector3d innovation = SO3Log(world_from_camera.normalized() * q_.conjugate());
   Eigen::Matrix<double, 3, kErrorDim> H = Eigen::Matrix<double, 3, kErrorDim>::Zero();
   H.block<3, 3>(0, kRot).setIdentity();
-  const Eigen::Matrix3d R = Eigen::Matrix3d::Identity() * sigma_rad * sigma_rad;
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity() * sigma_rad * sigma_rad;
+  if (heading_sigma_rad > 0) R(2, 2) = heading_sigma_rad * heading_sigma_rad;
   return Correct<3>(innovation, H, R, options_.gate_chi2_3dof);
+}
+
+UpdateResult PoseEkf::UpdateGravity(const Eigen::Vector3d& up_in_camera, double sigma_rad) {
+  if (!up_in_camera.allFinite() || !(up_in_camera.norm() > 0) || !std::isfinite(sigma_rad) || !(sigma_rad > 0)) return {Rejection::kNotFinite, 0};
+  // With the true rotation Exp(dtheta) R: R' Exp(-dtheta) e_z ~ R' e_z + R' [e_z]x dtheta.
+  const Eigen::Matrix3d Rt = q_.conjugate().toRotationMatrix();
+  Eigen::Matrix<double, 3, kErrorDim> H = Eigen::Matrix<double, 3, kErrorDim>::Zero();
+  H.block<3, 3>(0, kRot) = Rt * Skew(Eigen::Vector3d::UnitZ());
+  const Eigen::Matrix3d R = Eigen::Matrix3d::Identity() * sigma_rad * sigma_rad;
+  return Correct<3>(up_in_camera.normalized() - Rt * Eigen::Vector3d::UnitZ(), H, R, options_.gate_chi2_3dof);
 }
 
 UpdateResult PoseEkf::UpdateRate(const Eigen::Vector3d& rate_in_camera_rad_s, double sigma_rad_s) {

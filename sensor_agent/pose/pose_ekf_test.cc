@@ -440,6 +440,12 @@ TEST(PoseFilterOptions, CheckNamesTheBadField) {
   EXPECT_EQ(o.Check(), "");
   o.pixel_sigma_px = -1;
   EXPECT_THAT(o.Check(), ::testing::HasSubstr("pixel_sigma_px"));
+  o = PoseFilterOptions();
+  o.gravity_sigma_deg = 0;
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("gravity_sigma_deg"));
+  o = PoseFilterOptions();
+  o.gravity_window_s = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("gravity_window_s"));
 }
 
 }  // namespace
@@ -489,6 +495,73 @@ TEST(PoseEkf, MovePositionResetsThePositionAndItsCorrelationsOnly) {
   ekf.MovePosition(Eigen::Vector3d(1, 2, 3), std::numeric_limits<double>::infinity());
   EXPECT_EQ(ekf.world_from_camera().translation, moved);
   EXPECT_EQ(ekf.covariance(), after);
+}
+
+
+// Issue 19, eighteenth session: the reorientation sets the orientation and its covariance and cuts
+// its correlations; position, velocity and the rest of the covariance stay.
+TEST(PoseEkf, MoveOrientationResetsTheOrientationAndItsCorrelationsOnly) {
+  const Rigid3d truth(SO3Exp(Eigen::Vector3d(0.1, -0.2, 0.3)), Eigen::Vector3d(5, -3, 1.7));
+  PoseEkf ekf = Filter(truth, 0.5, 2 * kDeg);
+  const PinholeIntrinsics k = Camera();
+  for (int i = 0; i < 6; ++i) {
+    const Eigen::Vector3d p = truth * Eigen::Vector3d(-3 + i, 0.5 * (i % 3) - 0.5, 8 + i);
+    (void)ekf.UpdatePoint(k, p, *ProjectToPixel(k, truth.Inverse() * p) + Eigen::Vector2d(0.3, -0.2), 0, {{{i, 0.3}, {}}});
+  }
+  ASSERT_GT(ekf.covariance().block(kPos, kRot, 3, 3).cwiseAbs().maxCoeff(), 1e-8) << "the updates correlate position and orientation";
+  const StateMatrix before = ekf.covariance();
+  const Eigen::Vector3d position = ekf.world_from_camera().translation;
+  const Eigen::Quaterniond turned = (Eigen::Quaterniond(Eigen::AngleAxisd(20 * kDeg, Eigen::Vector3d::UnitZ())) * truth.rotation).normalized();
+
+  ekf.MoveOrientation(turned, 3 * kDeg);
+  EXPECT_TRUE(ekf.world_from_camera().rotation.isApprox(turned, 1e-12));
+  EXPECT_EQ(ekf.world_from_camera().translation, position) << "position kept";
+  const StateMatrix& P = ekf.covariance();
+  const Eigen::Matrix3d rot = P.block(kRot, kRot, 3, 3);
+  EXPECT_TRUE(rot.isApprox(std::pow(3 * kDeg, 2) * Eigen::Matrix3d::Identity()));
+  EXPECT_EQ(P.block(kRot, 0, 3, kRot).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ(P.block(kRot, kRot + 3, 3, kErrorDim - kRot - 3).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ(P.block(kPos, kPos, 6, 6), before.block(kPos, kPos, 6, 6)) << "position and velocity blocks kept";
+  EXPECT_TRUE(IsSpd(ekf.covariance()));
+  EXPECT_TRUE(ekf.PoseCovariance().allFinite());
+
+  // Bad input changes nothing: a NaN, a non-unit quaternion, a sigma of 0 or infinity.
+  const StateMatrix after = ekf.covariance();
+  ekf.MoveOrientation(Eigen::Quaterniond(std::numeric_limits<double>::quiet_NaN(), 0, 0, 0), kDeg);
+  ekf.MoveOrientation(Eigen::Quaterniond(2, 0, 0, 0), kDeg);
+  ekf.MoveOrientation(truth.rotation, 0);
+  ekf.MoveOrientation(truth.rotation, std::numeric_limits<double>::infinity());
+  EXPECT_TRUE(ekf.world_from_camera().rotation.isApprox(turned, 1e-12));
+  EXPECT_EQ(ekf.covariance(), after);
+}
+
+// Issue 19, eighteenth session: the accelerometer's gravity levels the filter. A camera whose
+// orientation starts 6 deg off in tilt and 10 deg off in heading: readings of the true up bring the
+// tilt back within 0.2 deg and leave the heading, which gravity cannot see, where it was, with
+// nearly all its variance; degenerate readings are refused.
+TEST(PoseEkf, GravityLevelsTheTiltAndLeavesTheHeading) {
+  const Rigid3d truth(SO3Exp(Eigen::Vector3d(-1.4, 0.0, 0.3)), Eigen::Vector3d(2, 1, 1.7));  // pitched, looking sideways
+  const Eigen::Quaterniond off =
+      (Eigen::Quaterniond(Eigen::AngleAxisd(10 * kDeg, Eigen::Vector3d::UnitZ())) * Eigen::Quaterniond(Eigen::AngleAxisd(6 * kDeg, Eigen::Vector3d(1, 1, 0).normalized())) *
+       truth.rotation)
+          .normalized();
+  PoseEkf ekf = Filter(Rigid3d(off, truth.translation), 0.5, 8 * kDeg);
+  const double heading_variance = ekf.covariance()(kRot + 2, kRot + 2);
+  const Eigen::Vector3d up = truth.rotation.conjugate() * Eigen::Vector3d::UnitZ();
+  for (int i = 0; i < 20; ++i) ASSERT_TRUE(ekf.UpdateGravity(9.81 * up, 1 * kDeg).accepted()) << i;
+  const Eigen::Vector3d error = SO3Log(ekf.world_from_camera().rotation * truth.rotation.conjugate());  // world frame
+  EXPECT_LT(error.head<2>().norm(), 0.2 * kDeg) << "tilt levelled";
+  EXPECT_NEAR(error.z(), 10 * kDeg, 0.5 * kDeg) << "heading unseen by gravity";
+  // The heading's variance stays nearly as it was (the error-state reset after the first, 6 deg
+  // correction correlates heading with tilt, so the later readings take 14 % of it).
+  EXPECT_NEAR(ekf.covariance()(kRot + 2, kRot + 2), heading_variance, 0.2 * heading_variance);
+  EXPECT_TRUE(IsSpd(ekf.covariance()));
+  const StateMatrix before = ekf.covariance();
+  EXPECT_EQ(ekf.UpdateGravity(Eigen::Vector3d::Zero(), kDeg).rejection, Rejection::kNotFinite);
+  EXPECT_EQ(ekf.UpdateGravity(Eigen::Vector3d(std::numeric_limits<double>::quiet_NaN(), 0, 1), kDeg).rejection, Rejection::kNotFinite);
+  EXPECT_EQ(ekf.UpdateGravity(up, 0).rejection, Rejection::kNotFinite);
+  EXPECT_EQ(ekf.UpdateGravity(-up, kDeg).rejection, Rejection::kGate) << "an upside-down reading is gated";
+  EXPECT_EQ(ekf.covariance(), before);
 }
 
 }  // namespace

@@ -1,5 +1,6 @@
 #include "sensor_agent/pose/pose_inputs.h"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <fstream>
@@ -32,6 +33,7 @@ class CsvReader {
     r.line_ = 1;
     return r;
   }
+  bool Has(const std::string& column) const { return columns_.count(column) > 0; }
   // False at the end of the file; blank lines are skipped.
   bool NextRow() {
     std::string text;
@@ -115,6 +117,11 @@ absl::StatusOr<SensorLog> ReadSensorLog(const std::string& dir, const Eigen::Vec
   required.insert(required.begin(), "t_ns");
   absl::StatusOr<CsvReader> imu = CsvReader::Open(dir + "/imu.csv", "imu.csv", required);
   if (!imu.ok()) return imu.status();
+  // The accelerometer's columns are optional (older logs lack them); all three or none.
+  const std::vector<std::string> accel_cols = {"accel_x_m_s2", "accel_y_m_s2", "accel_z_m_s2"};
+  const int accel_present = static_cast<int>(std::count_if(accel_cols.begin(), accel_cols.end(), [&](const std::string& c) { return imu->Has(c); }));
+  if (accel_present != 0 && accel_present != 3) return absl::InvalidArgumentError("imu.csv:1: header has some of accel_x_m_s2, accel_y_m_s2, accel_z_m_s2 but not all");
+  const bool has_accel = accel_present == 3;
   while (imu->NextRow()) {
     ImuReading s;
     absl::StatusOr<int64_t> t = imu->GetInt("t_ns");
@@ -126,6 +133,11 @@ absl::StatusOr<SensorLog> ReadSensorLog(const std::string& dir, const Eigen::Vec
     s.t_ns = *t;
     s.orientation = q.normalized();
     s.gyro_rad_s = Eigen::Vector3d(v[4], v[5], v[6]);
+    if (has_accel) {
+      double a[3];
+      if (absl::Status st = GetAll(*imu, accel_cols, a); !st.ok()) return st;
+      s.accel_m_s2 = Eigen::Vector3d(a[0], a[1], a[2]);
+    }
     log.imu.push_back(s);
   }
   return log;
@@ -135,7 +147,7 @@ SensorLog FromSimulation(const sim::GpsImuStreams& streams) {
   SensorLog log;
   log.origin = streams.origin;
   for (const sim::GpsFix& f : streams.gps) log.gps.push_back({f.t_ns, f.valid, f.position_m, f.covariance});
-  for (const sim::ImuSample& s : streams.imu) log.imu.push_back({s.t_ns, s.orientation, s.gyro_rad_s});
+  for (const sim::ImuSample& s : streams.imu) log.imu.push_back({s.t_ns, s.orientation, s.gyro_rad_s, s.accel_m_s2});
   return log;
 }
 
@@ -173,7 +185,8 @@ void PoseTracker::Apply(const GpsReading& g) {
     if (!first_orientation_) return;
     const double sigma = std::sqrt(std::max(g.covariance.trace() / 3, ekf_.options().gps_min_sigma_m * ekf_.options().gps_min_sigma_m));
     ekf_.Initialize(g.t_ns, Rigid3d(first_orientation_->orientation, g.position_m), sigma,
-                    ekf_.options().orientation_sigma_deg * 3.14159265358979323846 / 180, /*position_from_gps_fix=*/true);
+                    ekf_.options().orientation_sigma_deg * 3.14159265358979323846 / 180, /*position_from_gps_fix=*/true,
+                    ekf_.options().heading_sigma_deg * 3.14159265358979323846 / 180);
     last_valid_gps_ns_ = g.t_ns;
     ++stats_.gps_used;
     return;
@@ -222,14 +235,46 @@ void PoseTracker::Apply(const ImuReading& s) {
   // Correlated AHRS error: a reading dt after the last counts as dt / correlation of an independent one.
   const double dt_s = previous_ns == INT64_MIN ? o.orientation_correlation_s : static_cast<double>(s.t_ns - previous_ns) * 1e-9;
   const double inflation = o.orientation_correlation_s > dt_s ? std::sqrt(o.orientation_correlation_s / dt_s) : 1.0;
-  const UpdateResult r = ekf_.UpdateOrientation(s.orientation, inflation * o.orientation_sigma_deg * 3.14159265358979323846 / 180);
+  const UpdateResult r = ekf_.UpdateOrientation(s.orientation, inflation * o.orientation_sigma_deg * 3.14159265358979323846 / 180,
+                                                 inflation * o.heading_sigma_deg * 3.14159265358979323846 / 180);
   // The gyro's bias is correlated too (PoseFilterOptions::gyro_correlation_s).
   const double gyro_dt_s = previous_ns == INT64_MIN ? o.gyro_correlation_s : dt_s;
   const double gyro_inflation = o.gyro_correlation_s > gyro_dt_s ? std::sqrt(o.gyro_correlation_s / gyro_dt_s) : 1.0;
   (void)ekf_.UpdateRate(s.gyro_rad_s, gyro_inflation * o.gyro_sigma_rad_s);
+  Level(s);
   stats_.imu_used += r.accepted();
   stats_.imu_gated += r.rejection == Rejection::kGate;
   stats_.not_finite += r.rejection == Rejection::kNotFinite;
+}
+
+// The accelerometer's mean over a window as the world's up (PoseFilterOptions::gravity_window_s),
+// when the carrier neither sped up nor turned in it.
+void PoseTracker::Level(const ImuReading& s) {
+  const PoseFilterOptions& o = ekf_.options();
+  if (!(o.gravity_window_s > 0) || !s.accel_m_s2 || !s.accel_m_s2->allFinite()) return;
+  if (accel_count_ == 0) accel_start_ns_ = s.t_ns;
+  accel_sum_ += *s.accel_m_s2;
+  gyro_sum_ += s.gyro_rad_s;
+  ++accel_count_;
+  const double span_s = static_cast<double>(s.t_ns - accel_start_ns_) * 1e-9;
+  if (span_s < o.gravity_window_s) return;
+  const Eigen::Vector3d mean = accel_sum_ / accel_count_, rate = gyro_sum_ / accel_count_;
+  accel_sum_.setZero();
+  gyro_sum_.setZero();
+  accel_count_ = 0;
+  constexpr double kG = 9.80665;
+  if (std::abs(mean.norm() - kG) > o.gravity_tolerance_m_s2 || rate.norm() > o.gravity_max_rate_rad_s) {
+    ++stats_.gravity_moving;
+    return;
+  }
+  // Correlated error (gait, accelerometer bias): a window dt after the last applied counts as
+  // dt / gravity_correlation_s of an independent one.
+  const double dt_s = last_gravity_ns_ == INT64_MIN ? o.gravity_correlation_s : static_cast<double>(s.t_ns - last_gravity_ns_) * 1e-9;
+  const double inflation = o.gravity_correlation_s > dt_s ? std::sqrt(o.gravity_correlation_s / dt_s) : 1.0;
+  const UpdateResult r = ekf_.UpdateGravity(mean, inflation * o.gravity_sigma_deg * 3.14159265358979323846 / 180);
+  last_gravity_ns_ = s.t_ns;
+  stats_.gravity_used += r.accepted();
+  stats_.gravity_gated += r.rejection == Rejection::kGate;
 }
 
 PoseSample PoseTracker::Advance(int64_t t_ns) {

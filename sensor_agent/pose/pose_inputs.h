@@ -35,6 +35,9 @@ struct ImuReading {
   int64_t t_ns = 0;
   Eigen::Quaterniond orientation = Eigen::Quaterniond::Identity();  // AHRS world_from_camera
   Eigen::Vector3d gyro_rad_s = Eigen::Vector3d::Zero();             // body (camera) frame rate
+  // Specific force in the camera frame (m/s^2; +9.81 up at rest), when the log has it: the
+  // filter levels itself on its mean (PoseFilterOptions::gravity_window_s).
+  std::optional<Eigen::Vector3d> accel_m_s2;
 };
 
 struct SensorLog {
@@ -64,6 +67,8 @@ struct PoseSample {
 struct TrackerStats {
   int64_t gps_used = 0, gps_dropouts = 0, gps_gated = 0;
   int64_t imu_used = 0, imu_gated = 0;
+  int64_t gravity_used = 0, gravity_gated = 0;  // accelerometer windows applied / outside the gate
+  int64_t gravity_moving = 0;                   // windows skipped: the carrier sped up or turned
   int64_t time_rejected = 0;  // repeated or backwards time stamps, and samples older than the filter
   int64_t not_finite = 0;
 };
@@ -97,6 +102,11 @@ class PoseTracker {
   int64_t last_valid_gps_ns_ = INT64_MIN;  // the last fix applied (PoseFilterOptions::gps_correlation_s)
   std::optional<GpsReading> first_fix_;
   std::optional<ImuReading> first_orientation_;
+  // The accelerometer window being summed (PoseFilterOptions::gravity_window_s).
+  Eigen::Vector3d accel_sum_ = Eigen::Vector3d::Zero(), gyro_sum_ = Eigen::Vector3d::Zero();
+  int accel_count_ = 0;
+  int64_t accel_start_ns_ = INT64_MIN, last_gravity_ns_ = INT64_MIN;
+  void Level(const ImuReading& s);
   TrackerStats stats_;
 };
 

@@ -1,5 +1,6 @@
 #include "sensor_agent/pose/pose_inputs.h"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -141,9 +142,10 @@ TEST(PoseTracker, APersistingAhrsOffsetIsNotFollowedWhileTheVisionIsBlind) {
   for (ImuReading& s : log.imu) {
     if (s.t_ns >= 10 * kSecond) s.orientation = SO3Exp(Eigen::Vector3d(0, 0, 6 * kDeg)) * s.orientation;  // 6 deg of heading from 10 s on
   }
-  auto heading_error_deg = [&](double correlation_s) {
+  auto heading_error_deg = [&](double correlation_s, double heading_sigma_deg) {
     PoseFilterOptions o;
     o.orientation_correlation_s = correlation_s;
+    o.heading_sigma_deg = heading_sigma_deg;
     PoseTracker tracker(log, o);
     // Until 10 s a vision lock holds the orientation to 0.05 deg at every frame, then it is lost
     // (its covariance widened as VisionTracker does) and the frames show nothing for 6 s.
@@ -156,10 +158,52 @@ TEST(PoseTracker, APersistingAhrsOffsetIsNotFollowedWhileTheVisionIsBlind) {
     EXPECT_TRUE(s.valid);
     return s.world_from_camera.rotation.angularDistance(Walk(16).rotation) / kDeg;
   };
-  const double persisting = heading_error_deg(PoseFilterOptions{}.orientation_correlation_s);
-  const double one_second = heading_error_deg(1.0);  // 0.9 and 4.1 deg when written
+  const double persisting = heading_error_deg(PoseFilterOptions{}.orientation_correlation_s, PoseFilterOptions{}.heading_sigma_deg);
+  // The defaults before the sixteenth session: 1 s, and the heading's sigma the tilt's 2 deg.
+  const double one_second = heading_error_deg(1.0, 0);  // 0.9 and 4.1 deg when written (1 s with the 10 deg heading sigma: 0.8)
   EXPECT_LT(persisting, 2.0) << "followed the AHRS's offset; 1 s: " << one_second;
   EXPECT_GT(one_second, 3.0) << "1 s correlation (the default before) follows it";
+}
+
+// Issue 19, eighteenth session: an AHRS whose tilt drifts 8 deg off and stays there (the campus's
+// gyro_drift) is levelled by the accelerometer's gravity, averaged over half-second windows through
+// the walker's gait (a 1 m/s2 bob at 2 Hz); windows where the carrier turns are left out.
+TEST(PoseTracker, TheAccelerometerLevelsATiltedAhrs) {
+  constexpr double kDeg = 3.14159265358979323846 / 180;
+  constexpr double kPi = 3.14159265358979323846;
+  SensorLog log = WalkLog(20);
+  const Eigen::Quaterniond tilt(Eigen::AngleAxisd(8 * kDeg, Eigen::Vector3d(1, 1, 0).normalized()));
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> n(0, 0.02);
+  for (ImuReading& s : log.imu) {
+    const double t = s.t_ns * 1e-9;
+    s.orientation = (tilt * s.orientation).normalized();
+    const Eigen::Vector3d force(0, 0, 9.80665 + 1.0 * std::sin(2 * kPi * 2 * t));  // world: gravity and the gait's bob
+    s.accel_m_s2 = Walk(t).rotation.conjugate() * force + Eigen::Vector3d(n(rng), n(rng), n(rng));
+  }
+  auto tilt_error_deg = [&](double window_s, TrackerStats* stats) {
+    PoseFilterOptions o;
+    o.gravity_window_s = window_s;
+    PoseTracker tracker(log, o);
+    const PoseSample s = tracker.Advance(20 * kSecond);
+    EXPECT_TRUE(s.valid);
+    if (stats) *stats = tracker.stats();
+    const Eigen::Vector3d up = s.world_from_camera.rotation.conjugate() * Eigen::Vector3d::UnitZ();
+    const Eigen::Vector3d true_up = Walk(20).rotation.conjugate() * Eigen::Vector3d::UnitZ();
+    return std::acos(std::clamp(up.dot(true_up), -1.0, 1.0)) / kDeg;
+  };
+  TrackerStats stats;
+  const double levelled = tilt_error_deg(0.5, &stats), ahrs_only = tilt_error_deg(0, nullptr);
+  EXPECT_LT(levelled, 1.0) << "AHRS alone: " << ahrs_only;
+  EXPECT_GT(ahrs_only, 5.0);
+  EXPECT_GE(stats.gravity_used, 35);
+  EXPECT_EQ(stats.gravity_moving, 0);
+  // A carrier that turns at 0.5 rad/s: its windows are not taken as gravity.
+  for (ImuReading& s : log.imu) s.gyro_rad_s = Eigen::Vector3d(0, 0.5, 0);
+  PoseTracker turning(log);
+  (void)turning.Advance(20 * kSecond);
+  EXPECT_EQ(turning.stats().gravity_used, 0);
+  EXPECT_GE(turning.stats().gravity_moving, 35);
 }
 
 TEST(PoseTracker, NoPoseUntilTheFirstFixAndOrientation) {
@@ -192,7 +236,11 @@ TEST(SensorLog, ReadsTheSimulatorLogAtWorldCoordinatesNear1e6Metres) {
       EXPECT_LT((log->gps[i].position_m - direct.gps[i].position_m).norm(), 1e-8);
     }
   }
-  for (size_t i = 0; i < direct.imu.size(); i += 50) EXPECT_LT(AngleBetweenDeg(log->imu[i].orientation, direct.imu[i].orientation), 1e-9);
+  for (size_t i = 0; i < direct.imu.size(); i += 50) {
+    EXPECT_LT(AngleBetweenDeg(log->imu[i].orientation, direct.imu[i].orientation), 1e-9);
+    ASSERT_TRUE(log->imu[i].accel_m_s2 && direct.imu[i].accel_m_s2);
+    EXPECT_LT((*log->imu[i].accel_m_s2 - *direct.imu[i].accel_m_s2).norm(), 1e-9);
+  }
   // The filter on it, resampled to 30 Hz, stays near the truth (GPS drops out at 2 s).
   PoseTracker tracker(*log);
   for (const auto& [t_ns, truth] : streams.truth_at_video_rate) {
@@ -236,6 +284,18 @@ TEST(SensorLog, NonFiniteValuesAreRefusedByLineAndColumn) {
   EXPECT_THAT(std::string(ReadSensorLog(dir.string(), {0, 0, 0}).status().message()), HasSubstr("imu.csv:2: column gyro_y_rad_s"));
   std::ofstream(dir / "imu.csv") << imu_header << "1000,1,0,0,0,0,0,0\n";
   EXPECT_TRUE(ReadSensorLog(dir.string(), {0, 0, 0}).ok());
+  EXPECT_FALSE(ReadSensorLog(dir.string(), {0, 0, 0})->imu[0].accel_m_s2) << "a log without the accelerometer's columns";
+  // The accelerometer's columns are optional, but all three or none, and finite.
+  const std::string with_accel = "t_ns,qw,qx,qy,qz,gyro_x_rad_s,gyro_y_rad_s,gyro_z_rad_s,accel_x_m_s2,accel_y_m_s2,accel_z_m_s2\n";
+  std::ofstream(dir / "imu.csv") << with_accel << "1000,1,0,0,0,0,0,0,0,-9.8,0\n";
+  const auto read = ReadSensorLog(dir.string(), {0, 0, 0});
+  ASSERT_TRUE(read.ok()) << read.status();
+  ASSERT_TRUE(read->imu[0].accel_m_s2);
+  EXPECT_EQ(*read->imu[0].accel_m_s2, Eigen::Vector3d(0, -9.8, 0));
+  std::ofstream(dir / "imu.csv") << with_accel << "1000,1,0,0,0,0,0,0,0,inf,0\n";
+  EXPECT_THAT(std::string(ReadSensorLog(dir.string(), {0, 0, 0}).status().message()), HasSubstr("imu.csv:2: column accel_y_m_s2: not finite"));
+  std::ofstream(dir / "imu.csv") << "t_ns,qw,qx,qy,qz,gyro_x_rad_s,gyro_y_rad_s,gyro_z_rad_s,accel_x_m_s2\n" << "1000,1,0,0,0,0,0,0,0\n";
+  EXPECT_THAT(std::string(ReadSensorLog(dir.string(), {0, 0, 0}).status().message()), HasSubstr("accel_y_m_s2"));
   fs::remove_all(dir);
 }
 
