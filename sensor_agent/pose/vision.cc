@@ -42,6 +42,9 @@ std::string VisionOptions::Check() const {
   if (!(lock_alignment_px >= 0)) return "lock_alignment_px must be >= 0";
   if (!(max_alignment_score_px >= 0)) return "max_alignment_score_px must be >= 0";
   if (acquisition_coarse_passes < 1) return "acquisition_coarse_passes must be >= 1";
+  if (!(acquisition_heading_search_deg >= 0 && acquisition_heading_search_deg <= 180) || !(acquisition_heading_step_deg > 0))
+    return "acquisition_heading_search_deg must be in [0, 180] and acquisition_heading_step_deg > 0";
+  if (!(reorient_sigma_deg > 0 && reorient_sigma_deg <= 90)) return "reorient_sigma_deg must be in (0, 90]";
   if (!(relocalize_extent_m >= 0) || !(relocalize_step_m > 0) || !(relocalize_margin_px >= 0) || relocalize_extent_m > 20 * relocalize_step_m)
     return "relocalize_extent_m must be in [0, 20 relocalize_step_m], relocalize_step_m > 0 and relocalize_margin_px >= 0";
   if (!(relocalize_distinct_px >= 0)) return "relocalize_distinct_px must be >= 0";

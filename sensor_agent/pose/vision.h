@@ -177,6 +177,19 @@ struct VisionOptions {
   // alone with the roll left as it was). 0: off.
   double acquisition_roll_search_deg = 3;
   double acquisition_roll_step_deg = 0.5;
+  // The heading search while acquiring (issue 19, eighteenth session). An AHRS's heading is good
+  // to a few degrees only in a clean magnetic field: on the campus walk it is up to 22 deg off
+  // beside buildings (magnetic disturbance, gyro drift), far beyond the coarse search's 60 px
+  // (about 7 deg), and a pose started after ~16 s never locked. Before the first lock, whenever relocalisation searches, the pose is also turned about the
+  // world's vertical in steps of acquisition_heading_step_deg up to +-acquisition_heading_search_deg,
+  // each scored by the chamfer alignment; the best turn that fits well and stands out
+  // (relocalize_max_score_px, relocalize_margin_px, relocalize_distinct_px) has the positions
+  // searched around it too, and is taken when its best position fits better than the best at the
+  // filter's own heading by relocalize_margin_px. The turned orientation gets sigma
+  // reorient_sigma_deg per axis and no correlation with the rest. 0: off.
+  double acquisition_heading_search_deg = 30;
+  double acquisition_heading_step_deg = 6;
+  double reorient_sigma_deg = 3;
   // While acquiring, a full matching counts towards the lock (lock_frames) only when its coarse
   // alignment moved the image by at most this (px) and turned it by at most one
   // acquisition_roll_step_deg; otherwise towards lost_frames. A lock formed from a prediction the chamfer search had to move holds the
@@ -447,6 +460,7 @@ struct VisionFrameStats {
   bool weak_lock = false;    // ... because the tracked known features disagreed with the prediction
   int relocks = 0;           // the pose was declared lost (lost_frames) and its covariance inflated
   bool relocalized = false;  // the position search moved the filter (relocalize_extent_m)
+  double reoriented_heading_deg = 0;  // the heading search turned the pose about the vertical by this (acquisition_heading_search_deg)
   bool relocalize_waiting = false;  // ... found no position the model fits well (relocalize_max_score_px): nothing applied
   bool unfit = false;        // a keyframe whose chamfer alignment fitted too badly to apply anything (max_alignment_score_px)
   bool local_fit = false;    // a keyframe that fitted nowhere as a whole, matched only where its features' outline fits (local_fit_px)
@@ -457,7 +471,7 @@ struct VisionFrameStats {
   int rejected_tracked_jump = 0;
   int rejected_ambiguous = 0;  // keyframe lines left unmatched: their segment was nearly as near another model line's image (line_ambiguity_ratio)
   int rejected_structure = 0;  // keyframe corners refused: their model edges not found (VisionOptions::corners_on_edges 2)
-  bool height_applied = false;  // the carried camera's height above the ground was applied (carrier_height_m)  // tracked known features beyond tracked_max_innovation_px of the prediction
+  bool height_applied = false;  // the carried camera's height above the ground was applied (carrier_height_m)
   int klt_lost = 0;          // tracks KLT lost (status 0 or left the image)
   int landmarks_in_state = 0;  // unknown features in the pose filter's state after this frame (joint mode)
   // Unknown features that joined the state on this frame: estimate, covariance, ideal pixel.

@@ -138,6 +138,7 @@ struct VisionTracker::Impl {
   bool relocalize = true;      // the next keyframe searches positions around the filter's (first frame, lost)
   int relocalize_wait = 0;     // frames before a waiting relocalisation searches again (relocalize_retry_frames)
   bool locked_once = false;    // the lock has held since the start or since the pose was last declared lost
+  bool ever_locked = false;    // the lock has held at least once since the start (the heading search runs only before)
   int64_t lock_since_ns = 0;   // filter time the lock formed (locked_once)
   int good_full_matches = 0;  // consecutive full matchings that fitted well (lock_frames)
   int bad_full_matches = 0;   // ... and badly (lost_frames)
@@ -251,7 +252,13 @@ struct VisionTracker::Impl {
   // Relocalisation: moves the filter to the best chamfer fit on a grid of positions around its own;
   // kWaiting when the model fits well nowhere on the grid (relocalize_max_score_px).
   enum class Relocation { kStayed, kMoved, kWaiting };
-  Relocation Relocalize(PoseEkf& ekf, const cv::Mat& edge_distance, const cv::Mat& skyline_distance, double roll_search, double roll_step);
+  Relocation Relocalize(PoseEkf& ekf, const cv::Mat& edge_distance, const cv::Mat& skyline_distance, double roll_search, double roll_step,
+                        double* best_score = nullptr);
+  // The heading search while acquiring (VisionOptions::acquisition_heading_search_deg): the turn
+  // about the world's vertical (degrees) that fits the frame clearly best, if any.
+  std::optional<double> HeadingCandidate(const PoseEkf& ekf, const cv::Mat& edge_distance, const cv::Mat& skyline_distance, double roll_search,
+                                         double roll_step);
+  PoseEkf Turned(const PoseEkf& ekf, double degrees) const;
   // Known points the filter's pose predicts visible, skyline corners first.
   std::vector<Prediction> PredictPoints(const PoseEkf& ekf);
   // Sampled frame pixels of the predicted model edges, and those on the skyline.

@@ -3,6 +3,7 @@
 // chamfer alignment of the model's edges) and the lock's bookkeeping. Split from vision.cc.
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <unordered_map>
 #include <utility>
@@ -28,7 +29,7 @@ constexpr double kDegToRad = 3.14159265358979323846 / 180;
 // the best one when it fits clearly better than where it is. kWaiting (nothing moved) when even the
 // best fit is poor: a wrong position can then score best by chance (a tree over the façades' tops).
 VisionTracker::Impl::Relocation VisionTracker::Impl::Relocalize(PoseEkf& ekf, const cv::Mat& edge_distance, const cv::Mat& skyline_distance,
-                                                                double roll_search, double roll_step) {
+                                                                double roll_search, double roll_step, double* best_score) {
   const Eigen::Vector2d centre(k.cx, k.cy);
   const Eigen::Vector3d here = ekf.world_from_camera().translation;
   auto fit = [&](const Eigen::Vector3d& position) {
@@ -70,6 +71,7 @@ VisionTracker::Impl::Relocation VisionTracker::Impl::Relocalize(PoseEkf& ekf, co
       }
     }
   }
+  if (best_score) *best_score = best;
   if (options.relocalize_max_score_px > 0 && !(best <= options.relocalize_max_score_px)) return Relocation::kWaiting;
   if (!(best < at_here - options.relocalize_margin_px) || (options.max_alignment_score_px > 0 && best > options.max_alignment_score_px))
     return Relocation::kStayed;
@@ -85,6 +87,64 @@ VisionTracker::Impl::Relocation VisionTracker::Impl::Relocalize(PoseEkf& ekf, co
   last_height_ns = INT64_MIN;
   (void)ApplyCarrierHeight(ekf);
   return Relocation::kMoved;
+}
+
+// The heading search (issue 19, eighteenth session; VisionOptions::acquisition_heading_search_deg):
+// the filter's pose turned about the world's vertical through the camera in steps of
+// acquisition_heading_step_deg, each scored by the chamfer alignment as relocalisation scores
+// positions. The best turn (degrees) when it fits well (relocalize_max_score_px), beats the
+// filter's own heading by relocalize_margin_px and every heading more than a step and a half from
+// it by relocalize_distinct_px; nullopt otherwise.
+std::optional<double> VisionTracker::Impl::HeadingCandidate(const PoseEkf& ekf, const cv::Mat& edge_distance, const cv::Mat& skyline_distance,
+                                                            double roll_search, double roll_step) {
+  if (!(options.acquisition_heading_search_deg > 0)) return std::nullopt;
+  const Eigen::Vector2d centre(k.cx, k.cy);
+  const int n = static_cast<int>(std::floor(options.acquisition_heading_search_deg / options.acquisition_heading_step_deg + 1e-9));
+  std::vector<double> scores(2 * n + 1);
+  for (int i = -n; i <= n; ++i) {
+    const PoseEkf moved = Turned(ekf, i * options.acquisition_heading_step_deg);
+    std::vector<Eigen::Vector2d> samples, sky_samples;
+    EdgeSamples(moved, samples, sky_samples);
+    scores[i + n] = ChamferAlign(edge_distance, samples, skyline_distance, sky_samples, options.search_radius_px, centre, roll_search, roll_step, 4).score_px;
+  }
+  const int best = static_cast<int>(std::min_element(scores.begin(), scores.end()) - scores.begin()) - n;
+  double elsewhere = std::numeric_limits<double>::infinity();
+  for (int i = -n; i <= n; ++i)
+    if (std::abs(i - best) >= 2) elsewhere = std::min(elsewhere, scores[i + n]);
+  const double at_best = scores[best + n];
+  if (best == 0 || !(at_best < scores[n] - options.relocalize_margin_px) || !(at_best < elsewhere - options.relocalize_distinct_px) ||
+      (options.relocalize_max_score_px > 0 && !(at_best <= options.relocalize_max_score_px))) {
+    return std::nullopt;
+  }
+  // Then halved steps around the best, each scored with the image shift limited to what the step
+  // leaves (twice its image motion at the principal point): with the full 60 px shift, headings
+  // 6 deg apart score alike (the walk at 65.7 s: -12 deg scored 1.96 px, the right -18 to -21 deg
+  // 2.61), and the pose locked 8 deg off.
+  double heading = best * options.acquisition_heading_step_deg;
+  for (double step = 0.5 * options.acquisition_heading_step_deg; step >= 1.0 - 1e-9; step *= 0.5) {
+    const double radius = std::max(4.0, 2 * k.fx * std::tan(step * kDegToRad));
+    double best_score = std::numeric_limits<double>::infinity(), best_heading = heading;
+    for (int i = -1; i <= 1; ++i) {
+      const PoseEkf moved = Turned(ekf, heading + i * step);
+      std::vector<Eigen::Vector2d> samples, sky_samples;
+      EdgeSamples(moved, samples, sky_samples);
+      const double score = ChamferAlign(edge_distance, samples, skyline_distance, sky_samples, radius, centre, roll_search, roll_step, 2).score_px;
+      if (score < best_score) best_score = score, best_heading = heading + i * step;
+    }
+    heading = best_heading;
+  }
+  return heading;
+}
+
+// A copy of the filter turned by `degrees` about the world's vertical through the camera, its
+// orientation sigma reorient_sigma_deg and uncorrelated (PoseEkf::MoveOrientation).
+PoseEkf VisionTracker::Impl::Turned(const PoseEkf& ekf, double degrees) const {
+  PoseEkf turned = ekf;
+  if (degrees == 0) return turned;
+  const Eigen::Quaterniond q = ekf.world_from_camera().rotation;
+  turned.MoveOrientation((Eigen::Quaterniond(Eigen::AngleAxisd(degrees * kDegToRad, Eigen::Vector3d::UnitZ())) * q).normalized(),
+                         options.reorient_sigma_deg * kDegToRad);
+  return turned;
 }
 
 // Known points the filter's pose predicts visible: (map index, predicted pixel).
@@ -300,7 +360,26 @@ ImageAlignment VisionTracker::Impl::AlignModelEdges(PoseEkf& ekf, Frame& f, bool
   const Eigen::Vector2d centre(k.cx, k.cy);
   const double roll_search = options.acquisition_roll_search_deg * kDegToRad, roll_step = options.acquisition_roll_step_deg * kDegToRad;
   if (relocalize && options.relocalize_extent_m > 0) {
-    const Relocation r = Relocalize(ekf, edge_distance, skyline_distance, roll_search, roll_step);
+    // Before the first lock the heading may be what is off (an AHRS beside a building): a heading
+    // that fits at the filter's position is searched, and the positions around it too; it is taken
+    // when its best position fits better than the best at the filter's heading (a wrong position
+    // can make up for a wrong heading where few features are in view: the walk at 65 s moved
+    // 11 m with the heading left 20 deg off). Once vision has held the orientation the gyro keeps
+    // it within the coarse search's reach.
+    const std::optional<double> turn = ever_locked ? std::nullopt : HeadingCandidate(ekf, edge_distance, skyline_distance, roll_search, roll_step);
+    Relocation r;
+    if (turn) {
+      PoseEkf turned = Turned(ekf, *turn), stayed = ekf;
+      double turned_score = 0, stayed_score = 0;
+      const Relocation r_turned = Relocalize(turned, edge_distance, skyline_distance, roll_search, roll_step, &turned_score);
+      const Relocation r_stayed = Relocalize(stayed, edge_distance, skyline_distance, roll_search, roll_step, &stayed_score);
+      const bool take = turned_score < stayed_score - options.relocalize_margin_px;
+      ekf = take ? turned : stayed;
+      r = take ? r_turned : r_stayed;
+      if (take) f.stats.reoriented_heading_deg = *turn;
+    } else {
+      r = Relocalize(ekf, edge_distance, skyline_distance, roll_search, roll_step);
+    }
     f.stats.relocalized = r == Relocation::kMoved;
     f.stats.relocalize_waiting = r == Relocation::kWaiting;
     relocalize = f.stats.relocalize_waiting;  // searched again relocalize_retry_frames later
@@ -620,6 +699,7 @@ void VisionTracker::Impl::UpdateLock(PoseEkf& ekf, Frame& f, const ImageAlignmen
   bad_full_matches = good ? 0 : bad_full_matches + 1;
   if (!locked_once && good_full_matches >= options.lock_frames) lock_since_ns = ekf.time_ns();
   locked_once = locked_once || good_full_matches >= options.lock_frames;
+  ever_locked = ever_locked || locked_once;
   if (options.lost_frames > 0 && bad_full_matches >= options.lost_frames) {
     ekf.InflatePose(0.5, options.lost_orientation_sigma_deg * 3.14159265358979323846 / 180);
     bad_full_matches = 0;

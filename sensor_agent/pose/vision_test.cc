@@ -256,6 +256,30 @@ TEST_F(VisionTest, RelocalisationFindsACameraMetresFromItsGpsPosition) {
   EXPECT_GT(px_off, 2 * px) << "without the search the first frame stays off (" << error_off_m << " m)";
 }
 
+// Issue 19, eighteenth session: an AHRS beside a building can be 20 deg off in heading, beyond the
+// coarse search's 60 px. The first frame searches the heading and turns the filter to the one the
+// model fits; without the search the frame fits nowhere and the pose stays turned.
+TEST_F(VisionTest, TheFirstFrameFindsAHeading18DegreesOff) {
+  const PinholeIntrinsics& k = scenario_->world.FindCamera("backpack")->intrinsics;
+  const auto [frame, truth] = BackpackAt4s();
+  const Rigid3d start = Off(truth, {0, 0, 18}, {0.3, -0.2, 0});
+  auto run = [&](double search_deg) {
+    VisionOptions options;
+    options.acquisition_heading_search_deg = search_deg;
+    VisionTracker vision = CampusTracker(k, options);
+    PoseEkf ekf;
+    ekf.Initialize(0, start, 0.3, 2 * kDeg);
+    const VisionFrameStats stats = vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
+    return std::make_pair(stats.reoriented_heading_deg, AngleBetweenDeg(ekf.world_from_camera().rotation, truth.rotation));
+  };
+  const auto [turned_deg, error_deg] = run(VisionOptions().acquisition_heading_search_deg);
+  EXPECT_NEAR(turned_deg, -18, 4.5);
+  EXPECT_LT(error_deg, 2.0);
+  const auto [unturned_deg, unturned_error_deg] = run(0);
+  EXPECT_EQ(unturned_deg, 0);
+  EXPECT_GT(unturned_error_deg, 10.0) << "without the search the pose stays turned";
+}
+
 // Issue 19, eleventh session: a first frame whose view the model fits well nowhere (two draws of
 // 13: a tree over the façades' tops) let a wrong position score best by chance, 3 m off. Such a
 // relocalisation is not believed: the frame applies nothing, says it is waiting, and the search
@@ -855,6 +879,9 @@ TEST(VisionOptions, CheckNamesTheBadField) {
       {"max_alignment_score_px", [nan](VisionOptions& o) { o.max_alignment_score_px = nan; }},
       {"acquisition_coarse_passes", [](VisionOptions& o) { o.acquisition_coarse_passes = 0; }},
       {"relocalize_extent_m", [](VisionOptions& o) { o.relocalize_extent_m = 21 * o.relocalize_step_m; }},
+      {"acquisition_heading_search_deg", [](VisionOptions& o) { o.acquisition_heading_search_deg = 200; }},
+      {"acquisition_heading_search_deg", [](VisionOptions& o) { o.acquisition_heading_step_deg = 0; }},
+      {"reorient_sigma_deg", [](VisionOptions& o) { o.reorient_sigma_deg = 0; }},
       {"relocalize_distinct_px", [](VisionOptions& o) { o.relocalize_distinct_px = -0.1; }},
       {"relocalize_max_score_px", [](VisionOptions& o) { o.relocalize_max_score_px = -1; }},
       {"relocalize_max_score_px", [nan](VisionOptions& o) { o.relocalize_max_score_px = nan; }},

@@ -78,12 +78,15 @@ struct PoseBenchOptions {
   double lock_alignment_px = pose::VisionOptions{}.lock_alignment_px;
   double max_alignment_score_px = pose::VisionOptions{}.max_alignment_score_px;
   double relocalize_extent_m = pose::VisionOptions{}.relocalize_extent_m;
+  double heading_search_deg = pose::VisionOptions{}.acquisition_heading_search_deg;  // issue 19, eighteenth session
   double relocalize_step_m = pose::VisionOptions{}.relocalize_step_m;
   double relocalize_distinct_px = pose::VisionOptions{}.relocalize_distinct_px;
   double relocalize_max_score_px = pose::VisionOptions{}.relocalize_max_score_px;  // issue 19, eleventh session
   int relocalize_retry_frames = pose::VisionOptions{}.relocalize_retry_frames;
   double gyro_correlation_s = pose::PoseFilterOptions{}.gyro_correlation_s;  // issue 19
   double ahrs_sigma_deg = pose::PoseFilterOptions{}.orientation_sigma_deg;
+  double ahrs_heading_sigma_deg = pose::PoseFilterOptions{}.heading_sigma_deg;  // issue 19, eighteenth session
+  double gravity_window_s = pose::PoseFilterOptions{}.gravity_window_s;          // issue 19, eighteenth session
   double acquiring_sigma_px = pose::VisionOptions{}.acquiring_sigma_px;  // issue 19
   double gyro_sigma_rad_s = pose::PoseFilterOptions{}.gyro_sigma_rad_s;
   bool gyro_bias = pose::PoseFilterOptions{}.estimate_gyro_bias;  // issue 19: the bias in the state
@@ -157,6 +160,7 @@ struct Row {
   std::string key;           // JSON key
   std::vector<double> errors_px;         // every visible model point of every frame
   std::vector<double> frame_median_px;   // per frame, for the plot
+  std::vector<double> frame_t_s;         // ... and its time from the first frame
   std::vector<size_t> frame_errors_end;  // per frame, errors_px.size() after it (a window's slice)
   std::vector<double> frame_ms;          // per frame, CPU ms (filter + vision)
   double filter_ms = 0, detect_ms = 0, update_ms = 0, used = 0;
@@ -175,7 +179,7 @@ struct Row {
   std::map<std::tuple<double, double, double>, PointResiduals> point_residuals;
   int matches_beyond_3px = 0;
   std::array<double, pose::kVisionStageCount> stage_ms{};
-  int keyframes = 0, weak_locks = 0, relocks = 0, unfit = 0, relocalized = 0, relocalize_waiting = 0;
+  int keyframes = 0, weak_locks = 0, relocks = 0, unfit = 0, relocalized = 0, relocalize_waiting = 0, reoriented = 0;
   int64_t rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0, klt_lost = 0, unknown_dropped = 0, rejected_tracked_jump = 0, rejected_structure = 0, rejected_ambiguous = 0;
   int nees_frames = 0, nees_in_band = 0, nees_below = 0, nees_above = 0;
   // Unknown features joining the state (joint mode), against the static mesh's point on the true
@@ -366,7 +370,26 @@ struct RowFigures {
   double median_px = 0, p95_px = 0, nees_in_band = -1, nees_mean = 0, ms_per_frame = 0;
   int nees_frames = 0, nees_below = 0, nees_above = 0;
   std::vector<double> nees_at_frame;  // by frame index (NaN: no sample)
+  // Acquisition (issue 19, eighteenth session; a draw started later on the walk, --start-spread):
+  // the time of the first frame within 2 px whose next second stays within 5 px (-1: never), and
+  // the frames' median misregistration from then on (frames with no model point in view left out).
+  double lock_s = -1, after_lock_median_px = 0, after_lock_p95_px = 0;
 };
+
+// RowFigures' acquisition figures from a row's per-frame medians.
+void LockFigures(const std::vector<double>& frame_median_px, const std::vector<double>& frame_t_s, RowFigures& f) {
+  std::vector<double> px, t;
+  for (size_t i = 0; i < frame_median_px.size() && i < frame_t_s.size(); ++i)
+    if (frame_median_px[i] > 0) px.push_back(frame_median_px[i]), t.push_back(frame_t_s[i]);
+  constexpr size_t kSecond = 30;
+  for (size_t i = 0; i + kSecond <= px.size(); ++i) {
+    if (!(px[i] < 2) || !std::all_of(px.begin() + i, px.begin() + i + kSecond, [](double v) { return v < 5; })) continue;
+    f.lock_s = t[i];
+    const Spread after = SpreadOf(std::vector<double>(px.begin() + i, px.end()));
+    f.after_lock_median_px = after.median, f.after_lock_p95_px = after.p95;
+    return;
+  }
+}
 
 // The chi-square quantile for probability p (0.025 or 0.975) and `dof` degrees of freedom, by the
 // Wilson-Hilferty cube-root normal approximation (within 0.3 % of the exact value at 6 dof, closer
@@ -554,6 +577,8 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     fo.orientation_correlation_s = o.ahrs_correlation_s;
     fo.gyro_correlation_s = o.gyro_correlation_s;
     fo.orientation_sigma_deg = o.ahrs_sigma_deg;
+    fo.heading_sigma_deg = o.ahrs_heading_sigma_deg;
+    fo.gravity_window_s = o.gravity_window_s;
     fo.gps_correlation_s = o.gps_correlation_s;
     fo.gps_min_sigma_m = o.gps_min_sigma_m;
     fo.gate_chi2_2dof = o.gate_chi2_2dof;
@@ -578,6 +603,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.locked_search_sigmas = o.locked_search_sigmas;
     vo.line_ambiguity_ratio = o.line_ambiguity_ratio;
     vo.relocalize_extent_m = o.relocalize_extent_m;
+    vo.acquisition_heading_search_deg = o.heading_search_deg;
     vo.relocalize_step_m = o.relocalize_step_m;
     vo.relocalize_distinct_px = o.relocalize_distinct_px;
     vo.relocalize_max_score_px = o.relocalize_max_score_px;
@@ -644,6 +670,9 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
         row.weak_locks += s.weak_lock;
         row.unfit += s.unfit;
         row.relocalized += s.relocalized;
+        row.reoriented += s.reoriented_heading_deg != 0;
+        if (s.reoriented_heading_deg != 0)  // rare: acquisition only
+          std::fprintf(stderr, "%s t=%.2f s: heading searched, turned %+.0f deg\n", run.key.c_str(), o.start_s + t_s, s.reoriented_heading_deg);
         row.relocalize_waiting += s.relocalize_waiting;
         row.relocks += s.relocks;
         row.rejected_tracked_jump += s.rejected_tracked_jump;
@@ -738,6 +767,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
       row.frame_ms.push_back(frame_ms);
       const pose::PoseSample current = tracker.Current();
       Misregistration(k, frame_truth, current.world_from_camera, seen, row.errors_px, &row.frame_median_px);
+      row.frame_t_s.push_back(t_s);
       row.frame_errors_end.push_back(row.errors_px.size());
       const double nees = PoseNees(frame_truth, current);
       if (nees_csv) {
@@ -818,8 +848,11 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
                 s.p95, s.max, within.c_str(), nees, keyframes, r.filter_ms / frames, r.detect_ms / frames, r.update_ms / frames, r.TotalMs(),
                 max_frame_ms);
     if (r.key == "gps_imu_vision_50") default_nees_in_band = in_band;
-    if (figures) (*figures)[r.key] = {s.median, s.p95, in_band, r.nees_frames > 0 ? r.nees_sum / r.nees_frames : 0.0, r.TotalMs(), r.nees_frames,
-                                          r.nees_below, r.nees_above, r.nees_at_frame};
+    if (figures) {
+      RowFigures& f = (*figures)[r.key] = {s.median, s.p95, in_band, r.nees_frames > 0 ? r.nees_sum / r.nees_frames : 0.0, r.TotalMs(), r.nees_frames,
+                                           r.nees_below, r.nees_above, r.nees_at_frame};
+      LockFigures(r.frame_median_px, r.frame_t_s, f);
+    }
     char buf[512];
     int len = std::snprintf(buf, sizeof(buf), ",\"%s\":{\"median_px\":%.3f,\"p95_px\":%.3f,\"max_px\":%.2f,\"update_ms\":%.4f,\"ms_per_frame\":%.3f",
                             r.key.c_str(), s.median, s.p95, s.max, r.update_ms / frames, r.TotalMs());
@@ -855,14 +888,14 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     for (const Row* r : staged) std::printf(" **%.2f** |", r->TotalMs());
     std::printf("\n");
   }
-  std::printf("\nrejections over the run (features not applied, by reason):\n| mode | outside the gate | tracked, off the prediction | corner's edges not found | line's segment shared (ambiguous) | behind the camera | not finite | KLT lost | unknown features dropped (gate) | weak-lock keyframes | declared lost | keyframes the model fits nowhere | relocalised | waiting for a fit |\n");
-  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+  std::printf("\nrejections over the run (features not applied, by reason):\n| mode | outside the gate | tracked, off the prediction | corner's edges not found | line's segment shared (ambiguous) | behind the camera | not finite | KLT lost | unknown features dropped (gate) | weak-lock keyframes | declared lost | keyframes the model fits nowhere | relocalised | heading turned | waiting for a fit |\n");
+  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
   for (const Row& r : rows) {
     if (r.features == 0 || r.mode != "gps-imu-vision") continue;
-    std::printf("| %s | %lld | %lld | %lld | %lld | %lld | %lld | %lld | %lld | %d | %d | %d | %d | %d |\n", RowName(r).c_str(), static_cast<long long>(r.rejected_gate),
+    std::printf("| %s | %lld | %lld | %lld | %lld | %lld | %lld | %lld | %lld | %d | %d | %d | %d | %d | %d |\n", RowName(r).c_str(), static_cast<long long>(r.rejected_gate),
                 static_cast<long long>(r.rejected_tracked_jump), static_cast<long long>(r.rejected_structure), static_cast<long long>(r.rejected_ambiguous),
                 static_cast<long long>(r.rejected_behind), static_cast<long long>(r.rejected_not_finite), static_cast<long long>(r.klt_lost),
-                static_cast<long long>(r.unknown_dropped), r.weak_locks, r.relocks, r.unfit, r.relocalized, r.relocalize_waiting);
+                static_cast<long long>(r.unknown_dropped), r.weak_locks, r.relocks, r.unfit, r.relocalized, r.reoriented, r.relocalize_waiting);
   }
   std::printf("\nNEES of the pose per frame against the chi2(6) 95 %% band [%.2f, %.2f] (below: the covariance is too large; above: too small),"
               " and unknown features joining the state vs the static mesh's point on the true ray:\n"
@@ -1107,17 +1140,24 @@ int RunPoseSeeds(const PoseBenchOptions& o) {
   json << "{\"bench\":\"pose_seeds\",\"scenario\":\"" << o.scenario << "\",\"camera\":\"" << o.camera << "\",\"seed\":" << o.seed << ",\"seeds\":" << o.seeds
        << ",\"start_s\":" << o.start_s << ",\"start_spread_s\":" << o.start_spread_s;
   for (const std::string& key : one.rows) {
-    std::printf("\n%s: per draw\n| seed | median px | p95 px | NEES in band | mean NEES | ms/frame |\n| ---: | ---: | ---: | ---: | ---: | ---: |\n", key.c_str());
-    std::vector<double> medians, p95s, ms;
+    std::printf("\n%s: per draw (locked: the first frame within 2 px whose next second stays within 5 px; after it, the frames' median px)\n"
+                "| seed | start s | median px | p95 px | NEES in band | mean NEES | ms/frame | locked after s | then median px | then p95 px |\n"
+                "| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n",
+                key.c_str());
+    std::vector<double> medians, p95s, ms, lock_times;
+    int locked = 0;
     double in_band_frames = 0, frames = 0, below = 0, above = 0;
     int held = 0;  // draws whose median misregistration stays <= 1 px
     for (size_t i = 0; i < runs.size(); ++i) {
       const auto it = runs[i].find(key);
       if (it == runs[i].end()) continue;
       const RowFigures& f = it->second;
-      std::printf("| %d | %.2f | %.2f | %s | %.1f | %.2f |\n", o.seed + static_cast<int>(i), f.median_px, f.p95_px,
+      char lock[96] = "never | - | -";
+      if (f.lock_s >= 0) std::snprintf(lock, sizeof(lock), "%.1f | %.2f | %.2f", f.lock_s, f.after_lock_median_px, f.after_lock_p95_px);
+      std::printf("| %d | %.1f | %.2f | %.2f | %s | %.1f | %.2f | %s |\n", o.seed + static_cast<int>(i), o.start_s + i * o.start_spread_s, f.median_px, f.p95_px,
                   f.nees_in_band >= 0 ? (std::to_string(static_cast<int>(std::lround(100 * f.nees_in_band))) + " %").c_str() : "-", f.nees_mean,
-                  f.ms_per_frame);
+                  f.ms_per_frame, lock);
+      if (f.lock_s >= 0) ++locked, lock_times.push_back(f.lock_s);
       medians.push_back(f.median_px), p95s.push_back(f.p95_px), ms.push_back(f.ms_per_frame);
       held += f.median_px <= 1.0;
       if (f.nees_in_band >= 0) in_band_frames += f.nees_in_band * f.nees_frames, frames += f.nees_frames, below += f.nees_below, above += f.nees_above;
@@ -1127,17 +1167,19 @@ int RunPoseSeeds(const PoseBenchOptions& o) {
     const double pooled = frames > 0 ? in_band_frames / frames : -1;
     const MonteCarloNees mc = MonteCarloNeesOf(runs, key);
     std::printf("over the draws: median misregistration <= 1 px in %d of %zu; median px: median %.2f, worst %.2f; p95 px: median %.2f;"
-                " NEES in band, all frames pooled: %.1f %% (below %.1f %%, above %.1f %%); ms/frame: median %.2f\n",
+                " NEES in band, all frames pooled: %.1f %% (below %.1f %%, above %.1f %%); ms/frame: median %.2f; locked in %d of %zu"
+                " (median %.1f s after the start)\n",
                 held, medians.size(), m.median, m.max, p.median, 100 * pooled, frames > 0 ? 100 * below / frames : 0.0,
-                frames > 0 ? 100 * above / frames : 0.0, t.median);
+                frames > 0 ? 100 * above / frames : 0.0, t.median, locked, medians.size(), lock_times.empty() ? -1.0 : SpreadOf(lock_times).median);
     PrintMonteCarloNees(mc);
     char buf[800];
     std::snprintf(buf, sizeof(buf), ",\"%s\":{\"draws\":%zu,\"held_1px\":%d,\"median_px_median\":%.3f,\"median_px_worst\":%.3f,\"p95_px_median\":%.3f,"
                   "\"nees_in_band_pooled\":%.3f,\"nees_below_pooled\":%.3f,\"nees_above_pooled\":%.3f,\"anees_in_band\":%.3f,\"anees_below\":%.3f,"
-                  "\"anees_above\":%.3f,\"nees_in_band_scaled_per_second\":%.3f,\"nees_in_band_scaled_per_run\":%.3f,\"ms_per_frame_median\":%.3f}",
+                  "\"anees_above\":%.3f,\"nees_in_band_scaled_per_second\":%.3f,\"nees_in_band_scaled_per_run\":%.3f,\"ms_per_frame_median\":%.3f,"
+                  "\"locked\":%d}",
                   key.c_str(), medians.size(), held, m.median, m.max, p.median, pooled, frames > 0 ? below / frames : 0.0,
                   frames > 0 ? above / frames : 0.0, mc.Share(mc.in_band), mc.Share(mc.below), mc.Share(mc.above), mc.scaled_per_second_in_band,
-                  mc.scaled_per_run_in_band, t.median);
+                  mc.scaled_per_run_in_band, t.median, locked);
     json << buf;
   }
   json << "}";
@@ -1251,6 +1293,12 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--acquisition-sigma-deg", o->acquisition_sigma_deg, "orientation sigma added before the first vision frame (issue 19; 0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 90.0));
+  sub.add_option("--ahrs-heading-sigma", o->ahrs_heading_sigma_deg, "AHRS heading sigma about the vertical, deg (PoseFilterOptions::heading_sigma_deg; 0: --ahrs-sigma)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 180.0));
+  sub.add_option("--gravity-window", o->gravity_window_s, "level the filter on the accelerometer's mean over windows this long, s (PoseFilterOptions::gravity_window_s; 0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 10.0));
   sub.add_option("--ahrs-sigma", o->ahrs_sigma_deg, "AHRS orientation sigma, deg (PoseFilterOptions::orientation_sigma_deg)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.01, 90.0));
@@ -1279,6 +1327,9 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--lock-alignment-px", o->lock_alignment_px, "a full matching counts towards the lock only when its coarse alignment moved the image by at most this, px (0: not checked)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 100.0));
+  sub.add_option("--heading-search", o->heading_search_deg, "acquisition: search the heading up to +-this many degrees (VisionOptions::acquisition_heading_search_deg; 0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 180.0));
   sub.add_option("--relocalize-m", o->relocalize_extent_m, "relocalisation: horizontal grid half-extent around the filter's position, m (VisionOptions::relocalize_extent_m; 0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 20.0));
