@@ -180,13 +180,15 @@ struct VisionOptions {
   // The heading search while acquiring (issue 19, eighteenth session). An AHRS's heading is good
   // to a few degrees only in a clean magnetic field: on the campus walk it is up to 22 deg off
   // beside buildings (magnetic disturbance, gyro drift), far beyond the coarse search's 60 px
-  // (about 7 deg), and a pose started after ~16 s never locked. Before the first lock, whenever relocalisation searches, the pose is also turned about the
-  // world's vertical in steps of acquisition_heading_step_deg up to +-acquisition_heading_search_deg,
-  // each scored by the chamfer alignment; the best turn that fits well and stands out
-  // (relocalize_max_score_px, relocalize_margin_px, relocalize_distinct_px) has the positions
-  // searched around it too, and is taken when its best position fits better than the best at the
-  // filter's own heading by relocalize_margin_px. The turned orientation gets sigma
-  // reorient_sigma_deg per axis and no correlation with the rest. 0: off.
+  // (about 7 deg), and a pose started after ~16 s never locked. Before the first lock, whenever
+  // relocalisation searches, the pose is also turned about the world's vertical in steps of
+  // acquisition_heading_step_deg up to +-acquisition_heading_search_deg, each scored by the chamfer
+  // alignment; the best turn that fits well and stands out (relocalize_max_score_px,
+  // relocalize_margin_px, relocalize_distinct_px) is refined in halved steps to 1.5 deg, has the
+  // positions searched around it too, and is taken when its best position fits better than the
+  // best at the filter's own heading by relocalize_margin_px. The turned orientation gets sigma
+  // reorient_sigma_deg per axis and no correlation with the rest. 0: off. Over 8 draws started at
+  // 10-80 s, 7 lock against 2 (docs/BENCHMARKS.md, "Issue 19, eighteenth session").
   double acquisition_heading_search_deg = 30;
   double acquisition_heading_step_deg = 6;
   double reorient_sigma_deg = 3;
