@@ -77,6 +77,7 @@ std::string VisionOptions::Check() const {
   if (!(locked_search_sigmas >= 0 && std::isfinite(locked_search_sigmas)) || !(locked_search_floor_px >= 0 && std::isfinite(locked_search_floor_px)))
     return "locked_search_sigmas and locked_search_floor_px must be finite and >= 0";
   if (!(line_ambiguity_ratio >= 0 && line_ambiguity_ratio <= 1)) return "line_ambiguity_ratio must be in [0, 1]";
+  if (!(line_max_overhang_px >= 0) || !(line_max_overhang_share >= 0)) return "line_max_overhang_px and line_max_overhang_share must be >= 0";
   if (!(visibility_cache_m >= 0)) return "visibility_cache_m must be >= 0";
   if (!(nis_short_gain >= 0 && nis_short_gain <= 1 && nis_long_gain > 0 && nis_long_gain <= 1)) {
     return "nis_short_gain must be in [0, 1] and nis_long_gain in (0, 1]";

@@ -275,7 +275,7 @@ struct VisionTracker::Impl {
     int segment = -1;
     double distance_px = 0;  // mean distance of the segment's ends from the predicted line
   };
-  std::optional<LineCandidate> MatchLine(const PoseEkf& ekf, const LineFeature& f, const std::vector<Segment>& segments) const;
+  std::optional<LineCandidate> MatchLine(const PoseEkf& ekf, const LineFeature& f, const std::vector<Segment>& segments, bool* overhang = nullptr) const;
   // Each image segment to one model line at most (VisionOptions::line_ambiguity_ratio).
   void ResolveSharedSegments(std::vector<std::optional<LineCandidate>>& candidates, Frame& f) const;
   // A Fast Line Detector segment moved onto the sub-pixel intensity step along it.

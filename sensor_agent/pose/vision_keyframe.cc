@@ -197,9 +197,11 @@ void VisionTracker::Impl::EdgeSamples(const PoseEkf& ekf, std::vector<Eigen::Vec
 }
 
 // The longest detected segment along the predicted image of line feature `f` (its index and the
-// mean distance of its ends from the predicted line); nullopt if none.
+// mean distance of its ends from the predicted line) that does not reach beyond that image by more
+// than line_max_overhang_px + line_max_overhang_share x its length; nullopt if none. *overhang is
+// set when a longer segment was refused for reaching beyond.
 std::optional<VisionTracker::Impl::LineCandidate> VisionTracker::Impl::MatchLine(const PoseEkf& ekf, const LineFeature& f,
-                                                                                 const std::vector<Segment>& segments) const {
+                                                                                 const std::vector<Segment>& segments, bool* overhang) const {
   const std::optional<Eigen::Vector2d> pa = ekf.ProjectPoint(k, f.a), pb = ekf.ProjectPoint(k, f.b);
   if (!pa || !pb || (*pb - *pa).norm() < kMinSegment_px) return std::nullopt;
   const Eigen::Vector2d dir = (*pb - *pa).normalized();
@@ -217,6 +219,11 @@ std::optional<VisionTracker::Impl::LineCandidate> VisionTracker::Impl::MatchLine
     if (da > options.match_radius_px || db > options.match_radius_px) continue;
     const double ta = dir.dot(s.a - *pa), tb = dir.dot(s.b - *pa);
     if (std::max(ta, tb) < 0 || std::min(ta, tb) > length) continue;  // beside the model segment
+    const double beyond = std::max(0.0, -std::min(ta, tb)) + std::max(0.0, std::max(ta, tb) - length);
+    if (options.line_max_overhang_px > 0 && beyond > options.line_max_overhang_px + options.line_max_overhang_share * length) {
+      if (overhang) *overhang = true;
+      continue;
+    }
     best = LineCandidate{static_cast<int>(i), 0.5 * (da + db)};
     best_length = sl;
   }
@@ -530,8 +537,12 @@ void VisionTracker::Impl::FinePass(PoseEkf& ekf, Frame& f, const PoseEkf& coarse
   f.timer.Lap(kStageVisibility);
   const std::vector<std::pair<int, int>> matches = MatchPoints(f.predicted, f.corners, Eigen::Vector2d::Zero(), options.match_radius_px);
   std::vector<std::optional<LineCandidate>> candidates(map.lines.size());
-  for (size_t i = 0; i < map.lines.size(); ++i)
-    if (seen_lines[i]) candidates[i] = MatchLine(coarse, map.lines[i], segments);
+  for (size_t i = 0; i < map.lines.size(); ++i) {
+    if (!seen_lines[i]) continue;
+    bool overhang = false;
+    candidates[i] = MatchLine(coarse, map.lines[i], segments, &overhang);
+    f.stats.rejected_overhang += overhang && !candidates[i];
+  }
   ResolveSharedSegments(candidates, f);
   std::vector<std::optional<Segment>> line_matches(map.lines.size());
   for (size_t i = 0; i < map.lines.size(); ++i) {

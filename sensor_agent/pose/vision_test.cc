@@ -915,6 +915,8 @@ TEST(VisionOptions, CheckNamesTheBadField) {
       {"locked_search_sigmas", [](VisionOptions& o) { o.locked_search_sigmas = -1; }},
       {"locked_search_floor_px", [nan](VisionOptions& o) { o.locked_search_floor_px = nan; }},
       {"line_ambiguity_ratio", [](VisionOptions& o) { o.line_ambiguity_ratio = 1.5; }},
+      {"line_max_overhang_px", [](VisionOptions& o) { o.line_max_overhang_px = -1; }},
+      {"line_max_overhang_share", [](VisionOptions& o) { o.line_max_overhang_share = -0.1; }},
       {"nis_short_gain", [](VisionOptions& o) { o.nis_short_gain = 2; }},
       {"nis_long_gain", [](VisionOptions& o) { o.nis_long_gain = 0; }},
       {"nis_scale_cap", [](VisionOptions& o) { o.nis_scale_cap = 0.5; }},

@@ -64,6 +64,7 @@ struct PoseBenchOptions {
   double gps_min_sigma_m = pose::PoseFilterOptions{}.gps_min_sigma_m;
   double locked_search_sigmas = pose::VisionOptions{}.locked_search_sigmas;  // issue 19, seventeenth session
   double line_ambiguity_ratio = pose::VisionOptions{}.line_ambiguity_ratio;
+  double line_max_overhang_px = pose::VisionOptions{}.line_max_overhang_px;  // issue 19, eighteenth session
   double gate_chi2_2dof = pose::PoseFilterOptions{}.gate_chi2_2dof;  // issue 19, seventh session
   double pixel_sigma_px = pose::PoseFilterOptions{}.pixel_sigma_px;
   double tracked_sigma_px = pose::VisionOptions{}.tracked_sigma_px;
@@ -180,7 +181,7 @@ struct Row {
   int matches_beyond_3px = 0;
   std::array<double, pose::kVisionStageCount> stage_ms{};
   int keyframes = 0, weak_locks = 0, relocks = 0, unfit = 0, relocalized = 0, relocalize_waiting = 0, reoriented = 0;
-  int64_t rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0, klt_lost = 0, unknown_dropped = 0, rejected_tracked_jump = 0, rejected_structure = 0, rejected_ambiguous = 0;
+  int64_t rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0, klt_lost = 0, unknown_dropped = 0, rejected_tracked_jump = 0, rejected_structure = 0, rejected_ambiguous = 0, rejected_overhang = 0;
   int nees_frames = 0, nees_in_band = 0, nees_below = 0, nees_above = 0;
   // Unknown features joining the state (joint mode), against the static mesh's point on the true
   // ray through the same pixel: 3D error (m) and 3-dof NEES of their estimate.
@@ -602,6 +603,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.max_alignment_score_px = o.max_alignment_score_px;
     vo.locked_search_sigmas = o.locked_search_sigmas;
     vo.line_ambiguity_ratio = o.line_ambiguity_ratio;
+    vo.line_max_overhang_px = o.line_max_overhang_px;
     vo.relocalize_extent_m = o.relocalize_extent_m;
     vo.acquisition_heading_search_deg = o.heading_search_deg;
     vo.relocalize_step_m = o.relocalize_step_m;
@@ -678,6 +680,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
         row.rejected_tracked_jump += s.rejected_tracked_jump;
         row.rejected_structure += s.rejected_structure;
         row.rejected_ambiguous += s.rejected_ambiguous;
+        row.rejected_overhang += s.rejected_overhang;
         row.rejected_gate += s.rejected_gate, row.rejected_behind += s.rejected_behind, row.rejected_not_finite += s.rejected_not_finite;
         row.klt_lost += s.klt_lost, row.unknown_dropped += s.unknown_dropped;
         row.landmarks_in_state += s.landmarks_in_state;
@@ -888,12 +891,13 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     for (const Row* r : staged) std::printf(" **%.2f** |", r->TotalMs());
     std::printf("\n");
   }
-  std::printf("\nrejections over the run (features not applied, by reason):\n| mode | outside the gate | tracked, off the prediction | corner's edges not found | line's segment shared (ambiguous) | behind the camera | not finite | KLT lost | unknown features dropped (gate) | weak-lock keyframes | declared lost | keyframes the model fits nowhere | relocalised | heading turned | waiting for a fit |\n");
-  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+  std::printf("\nrejections over the run (features not applied, by reason):\n| mode | outside the gate | tracked, off the prediction | corner's edges not found | line's segment shared (ambiguous) | line's segment overhangs | behind the camera | not finite | KLT lost | unknown features dropped (gate) | weak-lock keyframes | declared lost | keyframes the model fits nowhere | relocalised | heading turned | waiting for a fit |\n");
+  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
   for (const Row& r : rows) {
     if (r.features == 0 || r.mode != "gps-imu-vision") continue;
-    std::printf("| %s | %lld | %lld | %lld | %lld | %lld | %lld | %lld | %lld | %d | %d | %d | %d | %d | %d |\n", RowName(r).c_str(), static_cast<long long>(r.rejected_gate),
+    std::printf("| %s | %lld | %lld | %lld | %lld | %lld | %lld | %lld | %lld | %lld | %d | %d | %d | %d | %d | %d |\n", RowName(r).c_str(), static_cast<long long>(r.rejected_gate),
                 static_cast<long long>(r.rejected_tracked_jump), static_cast<long long>(r.rejected_structure), static_cast<long long>(r.rejected_ambiguous),
+                static_cast<long long>(r.rejected_overhang),
                 static_cast<long long>(r.rejected_behind), static_cast<long long>(r.rejected_not_finite), static_cast<long long>(r.klt_lost),
                 static_cast<long long>(r.unknown_dropped), r.weak_locks, r.relocks, r.unfit, r.relocalized, r.reoriented, r.relocalize_waiting);
   }
@@ -1381,6 +1385,10 @@ Runner AddPoseBench(CLI::App& sub) {
                  "a segment two model lines reach goes to the nearer only when at most this times the other's distance (VisionOptions::line_ambiguity_ratio; 0: to neither, 1: always the nearer)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 1.0));
+  sub.add_option("--line-max-overhang", o->line_max_overhang_px,
+                 "a segment reaching beyond a model line's image by more than this plus 20 % of its length is not that line (VisionOptions::line_max_overhang_px; 0: not checked)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 1000.0));
   sub.add_option("--gps-min-sigma", o->gps_min_sigma_m, "floor of the GPS fixes' sigma, m (PoseFilterOptions::gps_min_sigma_m)")
       ->capture_default_str()
       ->check(ave::cli::Range(1e-3, 100.0));
