@@ -266,12 +266,18 @@ void PoseEkf::InflatePose(double position_sigma_m, double orientation_sigma_rad)
 void PoseEkf::MovePosition(const Eigen::Vector3d& position, double sigma_m) {
   if (!initialized_ || !position.allFinite() || !std::isfinite(sigma_m) || !(sigma_m > 0)) return;
   p_ = position;
-  P_.block<3, kErrorDim>(kPos, 0).setZero();
-  P_.block<kErrorDim, 3>(0, kPos).setZero();
-  P_.block<3, 3>(kPos, kPos) = Eigen::Matrix3d::Identity() * (sigma_m * sigma_m);
-  if (cross_.cols() > 0) cross_.block(kPos, 0, 3, cross_.cols()).setZero();
-  gps_bias_sensitivity_.block<3, 3>(kPos, 0).setZero();
-  if (bias_sensitivity_.cols() > 0) bias_sensitivity_.block(kPos, 0, 3, bias_sensitivity_.cols()).setZero();
+  ForgetBlock(kPos, sigma_m);
+}
+
+// The three error states from `first` on start again at `sigma` each, uncorrelated with everything
+// (the rest of the state, the landmarks, the consider terms' sensitivities).
+void PoseEkf::ForgetBlock(int first, double sigma) {
+  P_.block<3, kErrorDim>(first, 0).setZero();
+  P_.block<kErrorDim, 3>(0, first).setZero();
+  P_.block<3, 3>(first, first) = Eigen::Matrix3d::Identity() * (sigma * sigma);
+  if (cross_.cols() > 0) cross_.block(first, 0, 3, cross_.cols()).setZero();
+  gps_bias_sensitivity_.block<3, 3>(first, 0).setZero();
+  if (bias_sensitivity_.cols() > 0) bias_sensitivity_.block(first, 0, 3, bias_sensitivity_.cols()).setZero();
 }
 
 void PoseEkf::MoveOrientation(const Eigen::Quaterniond& world_from_camera, double sigma_rad) {
@@ -280,12 +286,7 @@ void PoseEkf::MoveOrientation(const Eigen::Quaterniond& world_from_camera, doubl
     return;
   }
   q_ = world_from_camera.normalized();
-  P_.block<3, kErrorDim>(kRot, 0).setZero();
-  P_.block<kErrorDim, 3>(0, kRot).setZero();
-  P_.block<3, 3>(kRot, kRot) = Eigen::Matrix3d::Identity() * (sigma_rad * sigma_rad);
-  if (cross_.cols() > 0) cross_.block(kRot, 0, 3, cross_.cols()).setZero();
-  gps_bias_sensitivity_.block<3, 3>(kRot, 0).setZero();
-  if (bias_sensitivity_.cols() > 0) bias_sensitivity_.block(kRot, 0, 3, bias_sensitivity_.cols()).setZero();
+  ForgetBlock(kRot, sigma_rad);
 }
 
 void PoseEkf::SetConsideredOrientation(const Eigen::Matrix3d& covariance) {

@@ -328,6 +328,7 @@ class PoseEkf {
   // state's sensitivity to each, two columns per bias (u, v); empty unless used. The landmarks'
   // rows are kept apart (below); the reported covariance reads the pose's.
   void PropagateBiases(const StateMatrix& transition);  // G = transition * G
+  void ForgetBlock(int first, double sigma);            // MovePosition / MoveOrientation
   // `KL`: the landmarks' gains (0 rows without landmarks); `HGb`, `HGg`: the measurement's
   // sensitivity to the per-feature and GPS biases before this update (H times the full state's
   // sensitivities, landmark rows included).

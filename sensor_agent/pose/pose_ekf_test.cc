@@ -456,15 +456,23 @@ namespace {
 
 // Relocalisation (issue 19, sixth session): MovePosition sets the position and its covariance and
 // cuts its correlations; the rest of the state and the covariance's symmetry and definiteness stay.
-TEST(PoseEkf, MovePositionResetsThePositionAndItsCorrelationsOnly) {
-  const Rigid3d truth(SO3Exp(Eigen::Vector3d(0.1, -0.2, 0.3)), Eigen::Vector3d(5, -3, 1.7));
+// A filter at `truth` whose position and orientation six point updates have correlated (each
+// point with its own consider bias), for the Move* tests.
+PoseEkf CorrelatedFilter(const Rigid3d& truth) {
   PoseEkf ekf = Filter(truth, 0.5, 2 * kDeg);
   const PinholeIntrinsics k = Camera();
-  // Correlate position with orientation through point updates, with a landmark in the state.
   for (int i = 0; i < 6; ++i) {
     const Eigen::Vector3d p = truth * Eigen::Vector3d(-3 + i, 0.5 * (i % 3) - 0.5, 8 + i);
     (void)ekf.UpdatePoint(k, p, *ProjectToPixel(k, truth.Inverse() * p) + Eigen::Vector2d(0.3, -0.2), 0, {{{i, 0.3}, {}}});
   }
+  return ekf;
+}
+
+TEST(PoseEkf, MovePositionResetsThePositionAndItsCorrelationsOnly) {
+  const Rigid3d truth(SO3Exp(Eigen::Vector3d(0.1, -0.2, 0.3)), Eigen::Vector3d(5, -3, 1.7));
+  PoseEkf ekf = CorrelatedFilter(truth);
+  const PinholeIntrinsics k = Camera();
+  // A landmark in the state too.
   ASSERT_TRUE(ekf.AddLandmark(7, truth * Eigen::Vector3d(0, 0, 12), Eigen::Matrix3d::Identity()));
   (void)ekf.UpdateLandmark(k, 7, *ProjectToPixel(k, Eigen::Vector3d(0, 0, 12)) + Eigen::Vector2d(0.2, 0.1), 1.0);
   const StateMatrix& P0 = ekf.covariance();
@@ -502,12 +510,7 @@ TEST(PoseEkf, MovePositionResetsThePositionAndItsCorrelationsOnly) {
 // its correlations; position, velocity and the rest of the covariance stay.
 TEST(PoseEkf, MoveOrientationResetsTheOrientationAndItsCorrelationsOnly) {
   const Rigid3d truth(SO3Exp(Eigen::Vector3d(0.1, -0.2, 0.3)), Eigen::Vector3d(5, -3, 1.7));
-  PoseEkf ekf = Filter(truth, 0.5, 2 * kDeg);
-  const PinholeIntrinsics k = Camera();
-  for (int i = 0; i < 6; ++i) {
-    const Eigen::Vector3d p = truth * Eigen::Vector3d(-3 + i, 0.5 * (i % 3) - 0.5, 8 + i);
-    (void)ekf.UpdatePoint(k, p, *ProjectToPixel(k, truth.Inverse() * p) + Eigen::Vector2d(0.3, -0.2), 0, {{{i, 0.3}, {}}});
-  }
+  PoseEkf ekf = CorrelatedFilter(truth);
   ASSERT_GT(ekf.covariance().block(kPos, kRot, 3, 3).cwiseAbs().maxCoeff(), 1e-8) << "the updates correlate position and orientation";
   const StateMatrix before = ekf.covariance();
   const Eigen::Vector3d position = ekf.world_from_camera().translation;
