@@ -444,6 +444,9 @@ TEST(PoseFilterOptions, CheckNamesTheBadField) {
   o.gravity_sigma_deg = 0;
   EXPECT_THAT(o.Check(), ::testing::HasSubstr("gravity_sigma_deg"));
   o = PoseFilterOptions();
+  o.heading_sigma_deg = -1;
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("heading_sigma_deg"));
+  o = PoseFilterOptions();
   o.gravity_window_s = std::numeric_limits<double>::quiet_NaN();
   EXPECT_THAT(o.Check(), ::testing::HasSubstr("gravity_window_s"));
 }
@@ -536,6 +539,30 @@ TEST(PoseEkf, MoveOrientationResetsTheOrientationAndItsCorrelationsOnly) {
   ekf.MoveOrientation(truth.rotation, std::numeric_limits<double>::infinity());
   EXPECT_TRUE(ekf.world_from_camera().rotation.isApprox(turned, 1e-12));
   EXPECT_EQ(ekf.covariance(), after);
+}
+
+// Issue 19, eighteenth session: an AHRS's heading has its own sigma. The filter starts with it about
+// the world's vertical, and a reading 5 deg off about every world axis, at 1 deg of tilt and 10 deg
+// of heading, moves the tilt most of the way and the heading a little.
+TEST(PoseEkf, AnAhrsHeadingWeighsLessThanItsTilt) {
+  const Rigid3d truth(SO3Exp(Eigen::Vector3d(-1.4, 0.0, 0.3)), Eigen::Vector3d(2, 1, 1.7));
+  PoseEkf ekf;
+  ekf.Initialize(0, truth, 0.5, 2 * kDeg, false, 10 * kDeg);
+  EXPECT_NEAR(ekf.covariance()(kRot + 2, kRot + 2), std::pow(10 * kDeg, 2), 1e-12);
+  EXPECT_NEAR(ekf.covariance()(kRot, kRot), std::pow(2 * kDeg, 2), 1e-12);
+  const Eigen::Vector3d off = Eigen::Vector3d::Constant(5 * kDeg);
+  ASSERT_TRUE(ekf.UpdateOrientation(SO3Exp(off) * truth.rotation, 1 * kDeg, 10 * kDeg).accepted());
+  const Eigen::Vector3d moved = SO3Log(ekf.world_from_camera().rotation * truth.rotation.conjugate());
+  EXPECT_GT(moved.x(), 0.7 * off.x()) << "tilt: 2 deg prior against a 1 deg reading";
+  EXPECT_GT(moved.y(), 0.7 * off.y());
+  EXPECT_NEAR(moved.z(), 0.5 * off.z(), 0.05 * off.z()) << "heading: 10 deg prior against a 10 deg reading";
+  EXPECT_TRUE(IsSpd(ekf.covariance()));
+  // Without a heading sigma the reading's own sigma holds about every axis, as before.
+  PoseEkf isotropic;
+  isotropic.Initialize(0, truth, 0.5, 2 * kDeg);
+  EXPECT_NEAR(isotropic.covariance()(kRot + 2, kRot + 2), std::pow(2 * kDeg, 2), 1e-12);
+  ASSERT_TRUE(isotropic.UpdateOrientation(SO3Exp(off) * truth.rotation, 1 * kDeg).accepted());
+  EXPECT_GT(SO3Log(isotropic.world_from_camera().rotation * truth.rotation.conjugate()).z(), 0.7 * off.z());
 }
 
 // Issue 19, eighteenth session: the accelerometer's gravity levels the filter. A camera whose
