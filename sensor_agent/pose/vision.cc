@@ -78,6 +78,8 @@ std::string VisionOptions::Check() const {
     return "locked_search_sigmas and locked_search_floor_px must be finite and >= 0";
   if (!(line_ambiguity_ratio >= 0 && line_ambiguity_ratio <= 1)) return "line_ambiguity_ratio must be in [0, 1]";
   if (!(line_max_overhang_px >= 0) || !(line_max_overhang_share >= 0)) return "line_max_overhang_px and line_max_overhang_share must be >= 0";
+  if (min_view_points < 0) return "min_view_points must be >= 0";
+  if (!(relocalize_min_outline_share >= 0 && relocalize_min_outline_share <= 1)) return "relocalize_min_outline_share must be in [0, 1]";
   if (!(visibility_cache_m >= 0)) return "visibility_cache_m must be >= 0";
   if (!(nis_short_gain >= 0 && nis_short_gain <= 1 && nis_long_gain > 0 && nis_long_gain <= 1)) {
     return "nis_short_gain must be in [0, 1] and nis_long_gain in (0, 1]";

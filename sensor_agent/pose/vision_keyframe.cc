@@ -32,11 +32,18 @@ VisionTracker::Impl::Relocation VisionTracker::Impl::Relocalize(PoseEkf& ekf, co
                                                                 double roll_search, double roll_step, double* best_score) {
   const Eigen::Vector2d centre(k.cx, k.cy);
   const Eigen::Vector3d here = ekf.world_from_camera().translation;
+  // A position from which the model shows less than relocalize_min_outline_share of the outline it
+  // shows from the filter's is not a candidate: the mean chamfer distance of a thin outline is low by
+  // chance (the walk at 86 s moved 2.2 m to where 3 points were in view, scoring 2.5 px against 6.7).
+  size_t outline_here = 0;
   auto fit = [&](const Eigen::Vector3d& position) {
     PoseEkf moved = ekf;
     moved.MovePosition(position, options.relocalize_step_m);
     std::vector<Eigen::Vector2d> samples, sky_samples;
     EdgeSamples(moved, samples, sky_samples);
+    if (position == here) outline_here = samples.size();
+    if (static_cast<double>(samples.size()) < options.relocalize_min_outline_share * static_cast<double>(outline_here))
+      return std::numeric_limits<double>::infinity();
     // (A 4 px first grid: the distance transform is smooth, truncated at 8 px.)
     return ChamferAlign(edge_distance, samples, skyline_distance, sky_samples, options.search_radius_px, centre, roll_search, roll_step, 4).score_px;
   };
@@ -366,7 +373,12 @@ ImageAlignment VisionTracker::Impl::AlignModelEdges(PoseEkf& ekf, Frame& f, bool
   f.timer.Lap(kStageEdges);
   const Eigen::Vector2d centre(k.cx, k.cy);
   const double roll_search = options.acquisition_roll_search_deg * kDegToRad, roll_step = options.acquisition_roll_step_deg * kDegToRad;
-  if (relocalize && options.relocalize_extent_m > 0) {
+  const bool search = relocalize && options.relocalize_extent_m > 0;
+  if (search && options.min_view_points > 0 && static_cast<int>(PredictPoints(ekf).size()) < options.min_view_points) {
+    // Too few model features in view for the chamfer score to tell positions apart: wait.
+    f.stats.relocalize_waiting = true;
+    relocalize_wait = options.relocalize_retry_frames - 1;
+  } else if (search) {
     // Before the first lock the heading may be what is off (an AHRS beside a building): a heading
     // that fits at the filter's position is searched, and the positions around it too; it is taken
     // when its best position fits better than the best at the filter's heading (a wrong position
@@ -395,6 +407,7 @@ ImageAlignment VisionTracker::Impl::AlignModelEdges(PoseEkf& ekf, Frame& f, bool
   }
   f.predicted = PredictPoints(ekf);
   f.stats.points_predicted = static_cast<int>(f.predicted.size());
+  f.stats.thin_view = options.min_view_points > 0 && f.stats.points_predicted < options.min_view_points;
   std::vector<Eigen::Vector2d> samples, sky_samples;
   std::vector<int> sample_lines, sky_lines;
   EdgeSamples(ekf, samples, sky_samples, &sample_lines, &sky_lines);
@@ -706,6 +719,12 @@ void VisionTracker::Impl::UpdateLock(PoseEkf& ekf, Frame& f, const ImageAlignmen
                        (alignment.offset.norm() <= options.lock_alignment_px &&
                         std::abs(alignment.rotation_rad) <= options.acquisition_roll_step_deg * kDegToRad + 1e-9);
   const bool good = applied >= options.min_tracked_known && f.stats.rejected <= options.weak_lock_gated_share * tried && aligned;
+  // Once the lock holds, a thin view whose few matches the gate took cannot show it lost: a few far
+  // façades over grass hold the pose. One that applied nothing counts: a blind stretch (the walk at
+  // 63-65 s, nothing in view) leaves the pose to drift, and the view that returns needs the search.
+  // (Before the first lock thin views count too: a prior 17 deg off may predict grass where the
+  // camera sees façades.)
+  if (!good && f.stats.thin_view && locked_once && applied > 0) return;
   good_full_matches = good ? good_full_matches + 1 : 0;
   bad_full_matches = good ? 0 : bad_full_matches + 1;
   if (!locked_once && good_full_matches >= options.lock_frames) lock_since_ns = ekf.time_ns();

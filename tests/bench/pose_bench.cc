@@ -65,6 +65,8 @@ struct PoseBenchOptions {
   double locked_search_sigmas = pose::VisionOptions{}.locked_search_sigmas;  // issue 19, seventeenth session
   double line_ambiguity_ratio = pose::VisionOptions{}.line_ambiguity_ratio;
   double line_max_overhang_px = pose::VisionOptions{}.line_max_overhang_px;  // issue 19, eighteenth session
+  int min_view_points = pose::VisionOptions{}.min_view_points;               // issue 19, nineteenth session
+  double relocalize_min_outline_share = pose::VisionOptions{}.relocalize_min_outline_share;
   double gate_chi2_2dof = pose::PoseFilterOptions{}.gate_chi2_2dof;  // issue 19, seventh session
   double pixel_sigma_px = pose::PoseFilterOptions{}.pixel_sigma_px;
   double tracked_sigma_px = pose::VisionOptions{}.tracked_sigma_px;
@@ -180,7 +182,7 @@ struct Row {
   std::map<std::tuple<double, double, double>, PointResiduals> point_residuals;
   int matches_beyond_3px = 0;
   std::array<double, pose::kVisionStageCount> stage_ms{};
-  int keyframes = 0, weak_locks = 0, relocks = 0, unfit = 0, relocalized = 0, relocalize_waiting = 0, reoriented = 0;
+  int keyframes = 0, weak_locks = 0, relocks = 0, unfit = 0, relocalized = 0, relocalize_waiting = 0, reoriented = 0, thin_views = 0;
   int64_t rejected_gate = 0, rejected_behind = 0, rejected_not_finite = 0, klt_lost = 0, unknown_dropped = 0, rejected_tracked_jump = 0, rejected_structure = 0, rejected_ambiguous = 0, rejected_overhang = 0;
   int nees_frames = 0, nees_in_band = 0, nees_below = 0, nees_above = 0;
   // Unknown features joining the state (joint mode), against the static mesh's point on the true
@@ -604,6 +606,8 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.locked_search_sigmas = o.locked_search_sigmas;
     vo.line_ambiguity_ratio = o.line_ambiguity_ratio;
     vo.line_max_overhang_px = o.line_max_overhang_px;
+    vo.min_view_points = o.min_view_points;
+    vo.relocalize_min_outline_share = o.relocalize_min_outline_share;
     vo.relocalize_extent_m = o.relocalize_extent_m;
     vo.acquisition_heading_search_deg = o.heading_search_deg;
     vo.relocalize_step_m = o.relocalize_step_m;
@@ -675,7 +679,14 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
         row.reoriented += s.reoriented_heading_deg != 0;
         if (s.reoriented_heading_deg != 0)  // rare: acquisition only
           std::fprintf(stderr, "%s t=%.2f s: heading searched, turned %+.0f deg\n", run.key.c_str(), o.start_s + t_s, s.reoriented_heading_deg);
+        if (s.relocks > 0 || s.relocalized) {  // rare: a technician reading the run wants to see where the lock went
+          const Rigid3d now = tracker.filter().world_from_camera();
+          std::fprintf(stderr, "%s t=%.2f s: %s, now %.1f m and %.1f deg from the truth\n", run.key.c_str(), o.start_s + t_s,
+                       s.relocalized ? "relocalised" : "declared lost", (now.translation - frame_truth.translation).norm(),
+                       Eigen::AngleAxisd(now.rotation * frame_truth.rotation.conjugate()).angle() * 180 / 3.14159265358979323846);
+        }
         row.relocalize_waiting += s.relocalize_waiting;
+        row.thin_views += s.keyframe && s.thin_view;
         row.relocks += s.relocks;
         row.rejected_tracked_jump += s.rejected_tracked_jump;
         row.rejected_structure += s.rejected_structure;
@@ -891,15 +902,15 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     for (const Row* r : staged) std::printf(" **%.2f** |", r->TotalMs());
     std::printf("\n");
   }
-  std::printf("\nrejections over the run (features not applied, by reason):\n| mode | outside the gate | tracked, off the prediction | corner's edges not found | line's segment shared (ambiguous) | line's segment overhangs | behind the camera | not finite | KLT lost | unknown features dropped (gate) | weak-lock keyframes | declared lost | keyframes the model fits nowhere | relocalised | heading turned | waiting for a fit |\n");
-  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+  std::printf("\nrejections over the run (features not applied, by reason):\n| mode | outside the gate | tracked, off the prediction | corner's edges not found | line's segment shared (ambiguous) | line's segment overhangs | behind the camera | not finite | KLT lost | unknown features dropped (gate) | weak-lock keyframes | declared lost | keyframes the model fits nowhere | relocalised | heading turned | waiting for a fit | thin-view keyframes |\n");
+  std::printf("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
   for (const Row& r : rows) {
     if (r.features == 0 || r.mode != "gps-imu-vision") continue;
-    std::printf("| %s | %lld | %lld | %lld | %lld | %lld | %lld | %lld | %lld | %lld | %d | %d | %d | %d | %d | %d |\n", RowName(r).c_str(), static_cast<long long>(r.rejected_gate),
+    std::printf("| %s | %lld | %lld | %lld | %lld | %lld | %lld | %lld | %lld | %lld | %d | %d | %d | %d | %d | %d | %d |\n", RowName(r).c_str(), static_cast<long long>(r.rejected_gate),
                 static_cast<long long>(r.rejected_tracked_jump), static_cast<long long>(r.rejected_structure), static_cast<long long>(r.rejected_ambiguous),
                 static_cast<long long>(r.rejected_overhang),
                 static_cast<long long>(r.rejected_behind), static_cast<long long>(r.rejected_not_finite), static_cast<long long>(r.klt_lost),
-                static_cast<long long>(r.unknown_dropped), r.weak_locks, r.relocks, r.unfit, r.relocalized, r.reoriented, r.relocalize_waiting);
+                static_cast<long long>(r.unknown_dropped), r.weak_locks, r.relocks, r.unfit, r.relocalized, r.reoriented, r.relocalize_waiting, r.thin_views);
   }
   std::printf("\nNEES of the pose per frame against the chi2(6) 95 %% band [%.2f, %.2f] (below: the covariance is too large; above: too small),"
               " and unknown features joining the state vs the static mesh's point on the true ray:\n"
@@ -1383,6 +1394,14 @@ Runner AddPoseBench(CLI::App& sub) {
       ->check(ave::cli::Range(0.0, 100.0));
   sub.add_option("--line-ambiguity-ratio", o->line_ambiguity_ratio,
                  "a segment two model lines reach goes to the nearer only when at most this times the other's distance (VisionOptions::line_ambiguity_ratio; 0: to neither, 1: always the nearer)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0.0, 1.0));
+  sub.add_option("--min-view-points", o->min_view_points,
+                 "a keyframe predicting fewer known points in view neither relocalises nor counts towards the loss (VisionOptions::min_view_points; 0: off)")
+      ->capture_default_str()
+      ->check(ave::cli::Range(0, 1000));
+  sub.add_option("--relocalize-min-outline", o->relocalize_min_outline_share,
+                 "a relocalisation candidate must show this share of the model outline the filter's position shows (VisionOptions::relocalize_min_outline_share; 0: any)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 1.0));
   sub.add_option("--line-max-overhang", o->line_max_overhang_px,
