@@ -62,6 +62,14 @@ class VisionTest : public ::testing::Test {
     const sim::SimulatedCamera sim_camera(scenario_->world, camera, scenario_->EffectsForCamera("backpack"), scenario_->seed);
     return {sim_camera.Frame(120, 4.0), sim_camera.PoseAt(4.0)};
   }
+  // A backpack tracker with `options`, `ekf` started at `start` with these sigmas, and the stats of
+  // its first frame.
+  static VisionFrameStats FirstFrame(const VisionOptions& options, const sim::SimImage& frame, const Rigid3d& start, double position_sigma_m,
+                                     double orientation_sigma_rad, PoseEkf& ekf) {
+    VisionTracker vision = CampusTracker(scenario_->world.FindCamera("backpack")->intrinsics, options);
+    ekf.Initialize(0, start, position_sigma_m, orientation_sigma_rad);
+    return vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
+  }
   // `truth` turned by `turn_deg` (world rotation vector, degrees) and moved by `offset_m`.
   static Rigid3d Off(const Rigid3d& truth, const Eigen::Vector3d& turn_deg, const Eigen::Vector3d& offset_m) {
     return Rigid3d(SO3Exp(turn_deg * kDeg) * truth.rotation, truth.translation + offset_m);
@@ -260,16 +268,13 @@ TEST_F(VisionTest, RelocalisationFindsACameraMetresFromItsGpsPosition) {
 // coarse search's 60 px. The first frame searches the heading and turns the filter to the one the
 // model fits; without the search the frame fits nowhere and the pose stays turned.
 TEST_F(VisionTest, TheFirstFrameFindsAHeading18DegreesOff) {
-  const PinholeIntrinsics& k = scenario_->world.FindCamera("backpack")->intrinsics;
   const auto [frame, truth] = BackpackAt4s();
   const Rigid3d start = Off(truth, {0, 0, 18}, {0.3, -0.2, 0});
   auto run = [&](double search_deg) {
     VisionOptions options;
     options.acquisition_heading_search_deg = search_deg;
-    VisionTracker vision = CampusTracker(k, options);
     PoseEkf ekf;
-    ekf.Initialize(0, start, 0.3, 2 * kDeg);
-    const VisionFrameStats stats = vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
+    const VisionFrameStats stats = FirstFrame(options, frame, start, 0.3, 2 * kDeg, ekf);
     return std::make_pair(stats.reoriented_heading_deg, AngleBetweenDeg(ekf.world_from_camera().rotation, truth.rotation));
   };
   const auto [turned_deg, error_deg] = run(VisionOptions().acquisition_heading_search_deg);
@@ -347,10 +352,8 @@ TEST_F(VisionTest, AThinViewDoesNotRelocalise) {
   auto first_frame = [&](int min_view_points) {
     VisionOptions options;
     options.min_view_points = min_view_points;
-    VisionTracker vision = CampusTracker(k, options);
     PoseEkf ekf;
-    ekf.Initialize(0, start, 1.0, 1 * kDeg);
-    const VisionFrameStats stats = vision.Update(thin.bgr.data(), thin.width, thin.height, ekf);
+    const VisionFrameStats stats = FirstFrame(options, thin, start, 1.0, 1 * kDeg, ekf);
     EXPECT_TRUE(ekf.covariance().allFinite());
     return std::make_pair(stats, (ekf.world_from_camera().translation - start.translation).norm());
   };
