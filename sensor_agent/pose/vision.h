@@ -252,14 +252,16 @@ struct VisionOptions {
   // the frames between apply nothing and cost what a tracked frame costs. 1: every frame.
   int relocalize_retry_frames = 5;
   // A thin view (issue 19, nineteenth session): a keyframe whose pose predicts fewer known points
-  // in view than this does not relocalise (it waits, as for relocalize_max_score_px) and, once the
-  // lock holds, does not count towards lost_frames; it may still count towards the lock. The walk at 80-90 s looks over grass
-  // at a few far façades (1-12 points predicted): each loss declared there relocalised by the
-  // chamfer score of that thin outline, 3-7 m and up to 22 deg away from a pose GPS and the gyro
-  // had held within 1 m. 0: off.
+  // in view than this does not relocalise (it waits, as for relocalize_max_score_px); once the lock
+  // holds, one that applied some matches does not count towards lost_frames (one that applied
+  // nothing does); it may still count towards the lock. The walk at 80-90 s looks over grass at a
+  // few far façades (1-12 points predicted): each loss declared there relocalised by the chamfer
+  // score of that thin outline, 3-7 m and up to 22 deg away from a pose GPS and the gyro had held
+  // within 1 m. 0: off.
   int min_view_points = 8;
   // ... and a relocalisation's candidate position must show at least this share of the model's
-  // outline (edge samples) that the filter's own position shows. 0: any.
+  // outline (edge samples) that the filter's own position shows: a thin outline's mean chamfer
+  // distance is low by chance (the walk with the rules above: 80-90 s p95 46.8 -> 21.9 px). 0: any.
   double relocalize_min_outline_share = 0.5;
   // Persisting detection bias of the known features (issue 19, docs/POSE.md "NEES by cause"): a
   // rendered or real building corner is found 0.2-0.4 px off its model point the same way at every
@@ -481,7 +483,7 @@ struct VisionFrameStats {
   bool relocalized = false;  // the position search moved the filter (relocalize_extent_m)
   double reoriented_heading_deg = 0;  // the heading search turned the pose about the vertical by this (acquisition_heading_search_deg)
   bool relocalize_waiting = false;  // ... found no position the model fits well (relocalize_max_score_px): nothing applied
-  bool thin_view = false;           // a keyframe predicting fewer known points than min_view_points: no relocalisation, no loss counted
+  bool thin_view = false;           // a keyframe predicting fewer known points than min_view_points (no relocalisation; see there)
   bool unfit = false;        // a keyframe whose chamfer alignment fitted too badly to apply anything (max_alignment_score_px)
   bool local_fit = false;    // a keyframe that fitted nowhere as a whole, matched only where its features' outline fits (local_fit_px)
   int known_tracked = 0;     // known features followed by KLT into this frame

@@ -34,7 +34,7 @@ VisionTracker::Impl::Relocation VisionTracker::Impl::Relocalize(PoseEkf& ekf, co
   const Eigen::Vector3d here = ekf.world_from_camera().translation;
   // A position from which the model shows less than relocalize_min_outline_share of the outline it
   // shows from the filter's is not a candidate: the mean chamfer distance of a thin outline is low by
-  // chance (the walk at 86 s moved 2.2 m to where 3 points were in view, scoring 2.5 px against 6.7).
+  // chance.
   size_t outline_here = 0;
   auto fit = [&](const Eigen::Vector3d& position) {
     PoseEkf moved = ekf;
