@@ -484,6 +484,7 @@ struct VisionFrameStats {
   double reoriented_heading_deg = 0;  // the heading search turned the pose about the vertical by this (acquisition_heading_search_deg)
   bool relocalize_waiting = false;  // ... found no position the model fits well (relocalize_max_score_px): nothing applied
   bool thin_view = false;           // a keyframe predicting fewer known points than min_view_points (no relocalisation; see there)
+  int relocalize_thin_outlines = 0;  // relocalisation positions not scored: under relocalize_min_outline_share of the outline here
   bool unfit = false;        // a keyframe whose chamfer alignment fitted too badly to apply anything (max_alignment_score_px)
   bool local_fit = false;    // a keyframe that fitted nowhere as a whole, matched only where its features' outline fits (local_fit_px)
   int known_tracked = 0;     // known features followed by KLT into this frame

@@ -136,6 +136,7 @@ struct VisionTracker::Impl {
   int frames_since_keyframe = 0;
   bool acquired = false;       // the first vision frame has widened the GPS + AHRS prior (acquisition_*)
   bool relocalize = true;      // the next keyframe searches positions around the filter's (first frame, lost)
+  int relocalize_thin_outlines = 0;  // this frame's relocalisation positions refused for their thin outline (VisionFrameStats)
   int relocalize_wait = 0;     // frames before a waiting relocalisation searches again (relocalize_retry_frames)
   bool locked_once = false;    // the lock has held since the start or since the pose was last declared lost
   bool ever_locked = false;    // the lock has held at least once since the start (the heading search runs only before)

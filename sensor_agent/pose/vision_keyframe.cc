@@ -42,8 +42,10 @@ VisionTracker::Impl::Relocation VisionTracker::Impl::Relocalize(PoseEkf& ekf, co
     std::vector<Eigen::Vector2d> samples, sky_samples;
     EdgeSamples(moved, samples, sky_samples);
     if (position == here) outline_here = samples.size();
-    if (static_cast<double>(samples.size()) < options.relocalize_min_outline_share * static_cast<double>(outline_here))
+    if (static_cast<double>(samples.size()) < options.relocalize_min_outline_share * static_cast<double>(outline_here)) {
+      ++relocalize_thin_outlines;
       return std::numeric_limits<double>::infinity();
+    }
     // (A 4 px first grid: the distance transform is smooth, truncated at 8 px.)
     return ChamferAlign(edge_distance, samples, skyline_distance, sky_samples, options.search_radius_px, centre, roll_search, roll_step, 4).score_px;
   };
@@ -379,6 +381,7 @@ ImageAlignment VisionTracker::Impl::AlignModelEdges(PoseEkf& ekf, Frame& f, bool
     f.stats.relocalize_waiting = true;
     relocalize_wait = options.relocalize_retry_frames - 1;
   } else if (search) {
+    relocalize_thin_outlines = 0;
     // Before the first lock the heading may be what is off (an AHRS beside a building): a heading
     // that fits at the filter's position is searched, and the positions around it too; it is taken
     // when its best position fits better than the best at the filter's heading (a wrong position
@@ -400,6 +403,7 @@ ImageAlignment VisionTracker::Impl::AlignModelEdges(PoseEkf& ekf, Frame& f, bool
       r = Relocalize(ekf, edge_distance, skyline_distance, roll_search, roll_step);
     }
     f.stats.relocalized = r == Relocation::kMoved;
+    f.stats.relocalize_thin_outlines = relocalize_thin_outlines;
     f.stats.relocalize_waiting = r == Relocation::kWaiting;
     relocalize = f.stats.relocalize_waiting;  // searched again relocalize_retry_frames later
     relocalize_wait = f.stats.relocalize_waiting ? options.relocalize_retry_frames - 1 : 0;
