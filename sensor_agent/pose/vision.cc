@@ -304,11 +304,23 @@ void VisionTracker::Impl::ConstrainHeight(PoseEkf& ekf, Frame& f) {
 bool VisionTracker::Impl::ApplyCarrierHeight(PoseEkf& ekf) {
   if (!(options.carrier_height_m > 0) || (last_height_ns != INT64_MIN && ekf.time_ns() <= last_height_ns)) return false;
   const Eigen::Vector3d p = ekf.world_from_camera().translation;
-  const std::optional<RayHit> hit = bvh.Raycast(p, Eigen::Vector3d(0, 0, -1), 1e-3, 4 * options.carrier_height_m + 10);
-  if (!hit || hit->triangle >= ground_triangle.size() || !ground_triangle[hit->triangle]) return false;
+  const double reach_m = 4 * options.carrier_height_m + 10;
+  auto ground = [&](const std::optional<RayHit>& h) { return h && h->triangle < ground_triangle.size() && ground_triangle[h->triangle]; };
+  std::optional<RayHit> hit = bvh.Raycast(p, Eigen::Vector3d(0, 0, -1), 1e-3, reach_m);
+  double ground_z = 0;
+  if (ground(hit)) {
+    ground_z = p.z() - hit->distance_m;
+  } else if (!hit) {
+    // Nothing below: the filter has sunk under the terrain (a GPS outage leaves only the inertial
+    // height, which drifts metres). The ground straight above is where the carrier stands.
+    hit = bvh.Raycast(p, Eigen::Vector3d(0, 0, 1), 1e-3, reach_m);
+    if (!ground(hit)) return false;
+    ground_z = p.z() + hit->distance_m;
+  } else {
+    return false;  // a bench, a kiosk roof or a tree below
+  }
   const double dt_s = last_height_ns == INT64_MIN ? options.carrier_height_correlation_s : static_cast<double>(ekf.time_ns() - last_height_ns) * 1e-9;
   const double inflation = options.carrier_height_correlation_s > dt_s ? options.carrier_height_correlation_s / dt_s : 1.0;
-  const double ground_z = p.z() - hit->distance_m;
   last_height_ns = ekf.time_ns();
   return ekf.UpdateHeight(ground_z + options.carrier_height_m, options.carrier_height_sigma_m * std::sqrt(inflation)).accepted();
 }

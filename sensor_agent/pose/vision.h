@@ -337,7 +337,8 @@ struct VisionOptions {
   // Carried camera (issue 19, eighth session): > 0, the camera rides this high above the ground
   // (a backpack or a helmet: the campus walker's 1.7 m), and every frame the filter's height is
   // measured as the static model's ground under its position (a ray cast straight down that hits
-  // terrain or road) plus this, with carrier_height_sigma_m (gait, posture, the model's ground
+  // terrain or road; when nothing is below, the filter has sunk under the terrain on inertial
+  // heights alone, and the terrain or road straight above is the ground) plus this, with carrier_height_sigma_m (gait, posture, the model's ground
   // error), the error correlated over carrier_height_correlation_s (a frame dt after the last
   // counts as dt / correlation of an independent one; the first at full weight). Far façades cannot
   // tell a height error from a pitch error, and GPS heights are 1-2 m off among buildings: without

@@ -377,6 +377,10 @@ struct RowFigures {
   // the time of the first frame within 2 px whose next second stays within 5 px (-1: never), and
   // the frames' median misregistration from then on (frames with no model point in view left out).
   double lock_s = -1, after_lock_median_px = 0, after_lock_p95_px = 0;
+  // Each known point's mean match error against its true projection (10+ sightings within 3 px):
+  // compared between draws, the part of the persisting errors the scenery decides (issue 19,
+  // twentieth session).
+  std::map<std::tuple<double, double, double>, Eigen::Vector2d> point_mean_px;
 };
 
 // RowFigures' acquisition figures from a row's per-frame medians.
@@ -866,6 +870,8 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
       RowFigures& f = (*figures)[r.key] = {s.median, s.p95, in_band, r.nees_frames > 0 ? r.nees_sum / r.nees_frames : 0.0, r.TotalMs(), r.nees_frames,
                                            r.nees_below, r.nees_above, r.nees_at_frame};
       LockFigures(r.frame_median_px, r.frame_t_s, f);
+      for (const auto& [point, q] : r.point_residuals)
+        if (q.n >= 10) f.point_mean_px[point] = Eigen::Vector2d(q.u / q.n, q.v / q.n);
     }
     char buf[512];
     int len = std::snprintf(buf, sizeof(buf), ",\"%s\":{\"median_px\":%.3f,\"p95_px\":%.3f,\"max_px\":%.2f,\"update_ms\":%.4f,\"ms_per_frame\":%.3f",
@@ -1123,6 +1129,39 @@ void PrintMonteCarloNees(const MonteCarloNees& mc) {
                 100 * mc.scaled_per_second_in_band, 100 * mc.scaled_per_run_in_band);
 }
 
+// The known points' persisting match errors compared between draws (issue 19, twentieth session):
+// for every point with a mean error on two draws or more, how much of the spread of those means is
+// common to the draws (the scenery's: the geometry and the light the detector sees) rather than
+// the draw's own noise. Per image axis, 1 - (mean within-point variance between draws) / (mean
+// squared error). Near 1: the draws share one draw of the scenery's errors, and a Monte Carlo over
+// them cannot average those out.
+struct SceneryShare {
+  int points = 0;
+  Eigen::Vector2d rms_px = Eigen::Vector2d::Zero(), share = Eigen::Vector2d::Constant(-1);
+};
+SceneryShare SceneryShareOf(const std::vector<std::map<std::string, RowFigures>>& runs, const std::string& key) {
+  std::map<std::tuple<double, double, double>, std::vector<Eigen::Vector2d>> by_point;
+  for (const auto& run : runs) {
+    const auto it = run.find(key);
+    if (it == run.end()) continue;
+    for (const auto& [point, mean] : it->second.point_mean_px) by_point[point].push_back(mean);
+  }
+  SceneryShare out;
+  Eigen::Vector2d within = Eigen::Vector2d::Zero(), total = Eigen::Vector2d::Zero();
+  for (const auto& [point, means] : by_point) {
+    if (means.size() < 2) continue;
+    Eigen::Vector2d mu = Eigen::Vector2d::Zero(), w = Eigen::Vector2d::Zero(), t = Eigen::Vector2d::Zero();
+    for (const Eigen::Vector2d& m : means) mu += m / static_cast<double>(means.size());
+    for (const Eigen::Vector2d& m : means) w += (m - mu).cwiseAbs2(), t += m.cwiseAbs2();
+    within += w / static_cast<double>(means.size() - 1), total += t / static_cast<double>(means.size());
+    ++out.points;
+  }
+  if (out.points == 0) return out;
+  out.rms_px = (total / out.points).cwiseSqrt();
+  for (int a = 0; a < 2; ++a) out.share[a] = total[a] > 0 ? 1 - within[a] / total[a] : -1;
+  return out;
+}
+
 int RunPoseSeeds(const PoseBenchOptions& o) {
   PoseBenchOptions one = o;
   one.seeds = 1;
@@ -1162,6 +1201,7 @@ int RunPoseSeeds(const PoseBenchOptions& o) {
     std::vector<double> medians, p95s, ms, lock_times;
     int locked = 0;
     double in_band_frames = 0, frames = 0, below = 0, above = 0;
+    double locked_frames = 0, locked_in_band = 0;  // the frames from each draw's lock on
     int held = 0;  // draws whose median misregistration stays <= 1 px
     for (size_t i = 0; i < runs.size(); ++i) {
       const auto it = runs[i].find(key);
@@ -1176,6 +1216,10 @@ int RunPoseSeeds(const PoseBenchOptions& o) {
       medians.push_back(f.median_px), p95s.push_back(f.p95_px), ms.push_back(f.ms_per_frame);
       held += f.median_px <= 1.0;
       if (f.nees_in_band >= 0) in_band_frames += f.nees_in_band * f.nees_frames, frames += f.nees_frames, below += f.nees_below, above += f.nees_above;
+      for (size_t fi = f.lock_s >= 0 ? static_cast<size_t>(std::lround(f.lock_s * 30)) : f.nees_at_frame.size(); fi < f.nees_at_frame.size(); ++fi) {
+        if (!std::isfinite(f.nees_at_frame[fi])) continue;
+        locked_frames += 1, locked_in_band += f.nees_at_frame[fi] >= kNeesLow && f.nees_at_frame[fi] <= kNeesHigh;
+      }
     }
     if (medians.empty()) continue;
     const Spread m = SpreadOf(medians), p = SpreadOf(p95s), t = SpreadOf(ms);
@@ -1187,14 +1231,21 @@ int RunPoseSeeds(const PoseBenchOptions& o) {
                 held, medians.size(), m.median, m.max, p.median, 100 * pooled, frames > 0 ? 100 * below / frames : 0.0,
                 frames > 0 ? 100 * above / frames : 0.0, t.median, locked, medians.size(), lock_times.empty() ? -1.0 : SpreadOf(lock_times).median);
     PrintMonteCarloNees(mc);
-    char buf[800];
+    const double locked_pooled = locked_frames > 0 ? locked_in_band / locked_frames : -1;
+    if (locked_frames > 0) std::printf("NEES in band from each draw's lock on, pooled: %.1f %% of %.0f frames\n", 100 * locked_pooled, locked_frames);
+    const SceneryShare scenery = SceneryShareOf(runs, key);
+    if (scenery.points > 0)
+      std::printf("Known points' persisting match errors (%d points with a mean on 2+ draws): RMS %.2f / %.2f px (u / v), of which the draws share"
+                  " %.0f %% / %.0f %% of the variance (the scenery's; the rest is each draw's noise)\n",
+                  scenery.points, scenery.rms_px.x(), scenery.rms_px.y(), 100 * scenery.share.x(), 100 * scenery.share.y());
+    char buf[1000];
     std::snprintf(buf, sizeof(buf), ",\"%s\":{\"draws\":%zu,\"held_1px\":%d,\"median_px_median\":%.3f,\"median_px_worst\":%.3f,\"p95_px_median\":%.3f,"
                   "\"nees_in_band_pooled\":%.3f,\"nees_below_pooled\":%.3f,\"nees_above_pooled\":%.3f,\"anees_in_band\":%.3f,\"anees_below\":%.3f,"
                   "\"anees_above\":%.3f,\"nees_in_band_scaled_per_second\":%.3f,\"nees_in_band_scaled_per_run\":%.3f,\"ms_per_frame_median\":%.3f,"
-                  "\"locked\":%d}",
+                  "\"locked\":%d,\"nees_in_band_locked_pooled\":%.3f,\"scenery_share_u\":%.3f,\"scenery_share_v\":%.3f}",
                   key.c_str(), medians.size(), held, m.median, m.max, p.median, pooled, frames > 0 ? below / frames : 0.0,
                   frames > 0 ? above / frames : 0.0, mc.Share(mc.in_band), mc.Share(mc.below), mc.Share(mc.above), mc.scaled_per_second_in_band,
-                  mc.scaled_per_run_in_band, t.median, locked);
+                  mc.scaled_per_run_in_band, t.median, locked, locked_pooled, scenery.share.x(), scenery.share.y());
     json << buf;
   }
   json << "}";
