@@ -47,6 +47,8 @@ std::string VisionOptions::Check() const {
   if (!(reorient_sigma_deg > 0 && reorient_sigma_deg <= 90)) return "reorient_sigma_deg must be in (0, 90]";
   if (!(relocalize_extent_m >= 0) || !(relocalize_step_m > 0) || !(relocalize_margin_px >= 0) || relocalize_extent_m > 20 * relocalize_step_m)
     return "relocalize_extent_m must be in [0, 20 relocalize_step_m], relocalize_step_m > 0 and relocalize_margin_px >= 0";
+  if (!(relocalize_extent_sigmas >= 0 && std::isfinite(relocalize_extent_sigmas)) || !(relocalize_max_extent_m >= 0 && relocalize_max_extent_m <= 100))
+    return "relocalize_extent_sigmas must be finite and >= 0, relocalize_max_extent_m in [0, 100]";
   if (!(relocalize_distinct_px >= 0)) return "relocalize_distinct_px must be >= 0";
   if (!(relocalize_max_score_px >= 0)) return "relocalize_max_score_px must be >= 0";
   if (relocalize_retry_frames < 1) return "relocalize_retry_frames must be >= 1";

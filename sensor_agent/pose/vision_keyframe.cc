@@ -53,11 +53,20 @@ VisionTracker::Impl::Relocation VisionTracker::Impl::Relocalize(PoseEkf& ekf, co
   double best = at_here;
   Eigen::Vector3d best_position = here;
   std::vector<std::pair<Eigen::Vector3d, double>> grid = {{here, at_here}};
-  const int n = static_cast<int>(std::floor(options.relocalize_extent_m / options.relocalize_step_m + 1e-9));
+  // The grid: +-relocalize_extent_m, wider where the prior's horizontal sigma says the position
+  // may lie farther (relocalize_extent_sigmas), with no more than 13 x 13 positions.
+  double extent = options.relocalize_extent_m, grid_step = options.relocalize_step_m;
+  if (options.relocalize_extent_sigmas > 0) {
+    const Eigen::Matrix3d p = ekf.covariance().block<3, 3>(kPos, kPos);
+    const double sigma = std::sqrt(std::max(0.0, 0.5 * (p(0, 0) + p(1, 1))));
+    const double wanted = std::min(options.relocalize_max_extent_m, options.relocalize_extent_sigmas * sigma);
+    if (std::isfinite(wanted) && wanted > extent) extent = wanted, grid_step = std::max(grid_step, extent / 6);
+  }
+  const int n = static_cast<int>(std::floor(extent / grid_step + 1e-9));
   for (int i = -n; i <= n; ++i) {
     for (int j = -n; j <= n; ++j) {
       if (i == 0 && j == 0) continue;
-      const Eigen::Vector3d position = here + options.relocalize_step_m * Eigen::Vector3d(i, j, 0);
+      const Eigen::Vector3d position = here + grid_step * Eigen::Vector3d(i, j, 0);
       const double score = fit(position);
       grid.emplace_back(position, score);
       if (score < best) best = score, best_position = position;
@@ -67,7 +76,7 @@ VisionTracker::Impl::Relocation VisionTracker::Impl::Relocalize(PoseEkf& ekf, co
   // within +-1.5 m: 8 of 13 draws held instead of 12; on far façades a pitch mimics a height,
   // and the chamfer score cannot tell them apart.)
   constexpr double kFinest_m = 0.5;
-  double step = options.relocalize_step_m;
+  double step = grid_step;
   while (step > kFinest_m + 1e-9) {
     step = std::max(kFinest_m, 0.5 * step);
     const Eigen::Vector3d around = best_position;
@@ -87,7 +96,7 @@ VisionTracker::Impl::Relocation VisionTracker::Impl::Relocalize(PoseEkf& ekf, co
   if (options.relocalize_distinct_px > 0) {
     double elsewhere = std::numeric_limits<double>::infinity();
     for (const auto& [position, score] : grid)
-      if ((position - best_position).norm() > 1.5 * options.relocalize_step_m) elsewhere = std::min(elsewhere, score);
+      if ((position - best_position).norm() > 1.5 * grid_step) elsewhere = std::min(elsewhere, score);
     if (!(best < elsewhere - options.relocalize_distinct_px)) return Relocation::kStayed;
   }
   ekf.MovePosition(best_position, step);

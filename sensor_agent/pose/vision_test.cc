@@ -962,6 +962,8 @@ TEST(VisionOptions, CheckNamesTheBadField) {
       {"line_max_overhang_share", [](VisionOptions& o) { o.line_max_overhang_share = -0.1; }},
       {"min_view_points", [](VisionOptions& o) { o.min_view_points = -1; }},
       {"relocalize_min_outline_share", [](VisionOptions& o) { o.relocalize_min_outline_share = 1.5; }},
+      {"relocalize_extent_sigmas", [](VisionOptions& o) { o.relocalize_extent_sigmas = -1; }},
+      {"relocalize_max_extent_m", [](VisionOptions& o) { o.relocalize_max_extent_m = 1e9; }},
       {"nis_short_gain", [](VisionOptions& o) { o.nis_short_gain = 2; }},
       {"nis_long_gain", [](VisionOptions& o) { o.nis_long_gain = 0; }},
       {"nis_scale_cap", [](VisionOptions& o) { o.nis_scale_cap = 0.5; }},
@@ -975,6 +977,29 @@ TEST(VisionOptions, CheckNamesTheBadField) {
     VisionOptions o;
     set(o);
     EXPECT_THAT(o.Check(), ::testing::HasSubstr(field)) << field;
+  }
+}
+
+// Issue 19, twentieth session: after a GPS outage the inertial position is metres off and its
+// sigma tens of metres; the +-3 m grid then moved the pose to the best fit within its reach, 5 m
+// off. With relocalize_extent_sigmas the grid spans the prior's uncertainty (at most
+// relocalize_max_extent_m).
+TEST_F(VisionTest, AnUncertainPriorIsSearchedOverItsUncertainty) {
+  const auto [frame, truth] = BackpackAt4s();
+  for (const Eigen::Vector3d& off : {Eigen::Vector3d(6.5, -3.0, 0), Eigen::Vector3d(-4.0, -6.0, 0)}) {
+    auto first_frame = [&](double extent_sigmas) {
+      VisionOptions options;
+      options.relocalize_extent_sigmas = extent_sigmas;
+      PoseEkf ekf;
+      const VisionFrameStats stats = FirstFrame(options, frame, Off(truth, {0, 0, 0.3}, off), 30.0, 1 * kDeg, ekf);
+      EXPECT_TRUE(ekf.covariance().allFinite());
+      return std::make_pair(stats.relocalized, (ekf.world_from_camera().translation - truth.translation).head<2>().norm());
+    };
+    const auto [moved, error_m] = first_frame(2);
+    const auto [moved_fixed, error_fixed_m] = first_frame(0);  // (7.2 m off, stayed; 2.4 m off, moved)
+    EXPECT_TRUE(moved) << "start " << off.transpose();
+    EXPECT_LT(error_m, 1.0) << "start " << off.transpose();
+    EXPECT_GT(error_fixed_m, 2.0) << "the +-3 m grid cannot reach it; start " << off.transpose();
   }
 }
 

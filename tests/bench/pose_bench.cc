@@ -81,6 +81,8 @@ struct PoseBenchOptions {
   double lock_alignment_px = pose::VisionOptions{}.lock_alignment_px;
   double max_alignment_score_px = pose::VisionOptions{}.max_alignment_score_px;
   double relocalize_extent_m = pose::VisionOptions{}.relocalize_extent_m;
+  double relocalize_extent_sigmas = pose::VisionOptions{}.relocalize_extent_sigmas;  // issue 19, twentieth session
+  double relocalize_max_extent_m = pose::VisionOptions{}.relocalize_max_extent_m;
   double heading_search_deg = pose::VisionOptions{}.acquisition_heading_search_deg;  // issue 19, eighteenth session
   double relocalize_step_m = pose::VisionOptions{}.relocalize_step_m;
   double relocalize_distinct_px = pose::VisionOptions{}.relocalize_distinct_px;
@@ -613,6 +615,8 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     vo.min_view_points = o.min_view_points;
     vo.relocalize_min_outline_share = o.relocalize_min_outline_share;
     vo.relocalize_extent_m = o.relocalize_extent_m;
+    vo.relocalize_extent_sigmas = o.relocalize_extent_sigmas;
+    vo.relocalize_max_extent_m = o.relocalize_max_extent_m;
     vo.acquisition_heading_search_deg = o.heading_search_deg;
     vo.relocalize_step_m = o.relocalize_step_m;
     vo.relocalize_distinct_px = o.relocalize_distinct_px;
@@ -1396,6 +1400,9 @@ Runner AddPoseBench(CLI::App& sub) {
   sub.add_option("--heading-search", o->heading_search_deg, "acquisition: search the heading up to +-this many degrees (VisionOptions::acquisition_heading_search_deg; 0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 180.0));
+  sub.add_option("--relocalize-sigmas", o->relocalize_extent_sigmas,
+                 "relocalisation: widen the grid to this many of the prior's horizontal sigmas (VisionOptions::relocalize_extent_sigmas; 0: fixed grid)");
+  sub.add_option("--relocalize-max-m", o->relocalize_max_extent_m, "relocalisation: the widened grid's largest half-extent, m (VisionOptions::relocalize_max_extent_m)");
   sub.add_option("--relocalize-m", o->relocalize_extent_m, "relocalisation: horizontal grid half-extent around the filter's position, m (VisionOptions::relocalize_extent_m; 0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 20.0));
