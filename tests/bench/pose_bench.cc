@@ -310,8 +310,9 @@ void Plot(const std::vector<Row>& all_rows, const std::string& path, double seco
         r.key.find("joint") != std::string::npos || r.event)
       rows.push_back(r);
   }
-  const int w = 1200, h = 520, pad = 60;
-  cv::Mat img(h, w, CV_8UC3, cv::Scalar(255, 255, 255));
+  // The two plots on top, the legend below them (over the left plot it hid the points).
+  const int w = 1200, h = 520, pad = 60, legend_rows = static_cast<int>(rows.size());
+  cv::Mat img(h + 18 * legend_rows + 10, w, CV_8UC3, cv::Scalar(255, 255, 255));
   const cv::Scalar palette[] = {{60, 60, 200},  {40, 150, 40}, {200, 120, 30}, {160, 40, 160}, {30, 160, 200}, {90, 90, 90},
                                 {20, 20, 20},   {0, 90, 255},  {255, 0, 150}, {0, 200, 120}, {120, 60, 0},  {150, 150, 0}};
   auto log_y = [&](double px, int top, int bottom) {
@@ -357,8 +358,9 @@ void Plot(const std::vector<Row>& all_rows, const std::string& path, double seco
     const int x = lx0 + static_cast<int>(r.TotalMs() / (max_ms * 1.1) * (lx1 - lx0));
     cv::circle(img, {x, log_y(s.median, pad, h - pad)}, 5, c, cv::FILLED);
     cv::circle(img, {x, log_y(s.p95, pad, h - pad)}, 6, c, 2);
-    const int legend_y = h - pad - 10 - 18 * static_cast<int>(rows.size() - 1 - i);
-    cv::putText(img, RowName(r), {lx0 + 10, legend_y}, cv::FONT_HERSHEY_SIMPLEX, 0.45, c, 1);
+    const cv::Point legend(pad, h + 18 * static_cast<int>(i));
+    cv::circle(img, legend + cv::Point(-10, -4), 4, c, cv::FILLED);
+    cv::putText(img, RowName(r), legend, cv::FONT_HERSHEY_SIMPLEX, 0.4, c, 1);
     for (size_t f = 1; f < r.frame_median_px.size(); ++f) {
       const auto px = [&](size_t j) {
         return cv::Point(rx0 + static_cast<int>(j * (rx1 - rx0) / std::max<size_t>(1, r.frame_median_px.size() - 1)),
