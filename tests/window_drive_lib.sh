@@ -21,3 +21,23 @@ focus_viewer_window() {
   done
   [ "$focused" = 1 ] || give_up "could not focus the viewer window"
 }
+
+# Waits (up to 60 s) until the viewer's log ($out/window/viewer.log) says its three locked views
+# show cameras and each of those cameras' first frame arrived; fails otherwise.
+wait_locked_views_streaming() {
+  local log="$out/window/viewer.log" line ids id ready
+  for _ in $(seq 1 600); do
+    line=$(grep -o "viewer: locked views: .*" "$log" 2>/dev/null | tail -1 || true)
+    ids=${line#viewer: locked views: }
+    if [ -n "$line" ] && [[ "$ids" != *"(plan view)"* ]]; then
+      ready=1
+      IFS=',' read -ra cams <<<"$ids"
+      for id in "${cams[@]}"; do
+        grep -qF "viewer: first frame from camera '${id# }'" "$log" || { ready=0; break; }
+      done
+      [ "$ready" = 1 ] && return 0
+    fi
+    sleep 0.1
+  done
+  return 1
+}

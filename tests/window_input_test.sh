@@ -25,7 +25,10 @@ out=$1
 source "$2/tests/window_drive_lib.sh"
 focus_viewer_window
 trap 'give_up "an xdotool step failed"' ERR
-sleep 3                                  # live video and objects arrive
+# The first picture must show all three locked views with their video: wait for the viewer to say
+# its cells are filled and each locked camera's first frame arrived (CI stop 40 took it while one
+# cell was still a plan view, which then moved with the browse view).
+wait_locked_views_streaming || give_up "the locked views did not fill with live video within 60 s"
 xdotool key --delay 50 p                 # snapshot 1
 # The PNG is complete once it ends with its IEND chunk.
 for _ in $(seq 1 100); do

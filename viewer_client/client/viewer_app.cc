@@ -20,6 +20,7 @@
 #include "ave/net/tls.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
 #include "model_store/common/cpu_clock.h"
 #include "model_store/common/log.h"
 #include "model_store/geometry/bvh.h"
@@ -132,6 +133,17 @@ std::vector<View> QuadViews(int width, int height, const View& browse, const std
   return views;
 }
 
+std::array<std::string, 3> FillLockedViews(std::array<std::string, 3> locked, const std::vector<std::string>& camera_ids) {
+  auto next = camera_ids.begin();
+  for (std::string& cell : locked) {
+    if (!cell.empty()) continue;
+    while (next != camera_ids.end() && std::find(locked.begin(), locked.end(), *next) != locked.end()) ++next;
+    if (next == camera_ids.end()) break;
+    cell = *next++;
+  }
+  return locked;
+}
+
 SelectionViews SelectionOf(const std::vector<View>& views) {
   SelectionViews out;
   for (const View& v : views) out.clip_from_local.push_back(v.projection * v.view);
@@ -202,6 +214,7 @@ class Session {
     state_.display = renderer.options().display;
     if (options.avatars_only) state_.display.video_on_people = false;
     for (size_t i = 0; i < options.locked_cameras.size() && i < 3; ++i) state_.locked[i] = options.locked_cameras[i];
+    auto_lock_ = options.locked_cameras.empty();
     browse_.set_speed(20);
   }
 
@@ -290,9 +303,22 @@ class Session {
   }
 
   std::vector<View> ComputeViews(const std::vector<CameraView>& cams, int w, int h) {
-    if (options_.locked_cameras.empty() && !auto_locked_ && cams.size() > 0) {
-      for (size_t i = 0; i < cams.size() && i < 3; ++i) state_.locked[i] = cams[i].id;  // the first by id
-      auto_locked_ = true;
+    // Without --lock the cells take the first cameras by id as they report, until the operator
+    // presses a lock button (the cells then differ from what was filled in last).
+    if (auto_lock_ && state_.locked != auto_locked_) auto_lock_ = false;
+    if (auto_lock_) {
+      std::vector<std::string> ids;
+      for (const CameraView& c : cams) ids.push_back(c.id);
+      state_.locked = auto_locked_ = FillLockedViews(state_.locked, ids);
+    }
+    if (state_.locked != logged_locked_) {
+      logged_locked_ = state_.locked;
+      AVE_LOG(INFO) << "viewer: locked views: " << absl::StrJoin(state_.locked, ", ", [](std::string* out, const std::string& id) {
+        out->append(id.empty() ? "(plan view)" : id);
+      });
+    }
+    for (const CameraView& c : cams) {
+      if (c.image && first_frame_logged_.insert(c.id).second) AVE_LOG(INFO) << "viewer: first frame from camera '" << c.id << "'";
     }
     projectors_ = MakeProjectors(cams);
     View browse = BrowseView({0, 0, w, h}, browse_.eye(), browse_.Target(), options_.browse_fov_deg);
@@ -659,7 +685,10 @@ class Session {
   bool panel_replay_ = false;  // started from the panel (to the time asked): live once it ends
   bool replay_first_logged_ = false;  // its first recorded moment shown was logged
   std::array<int, 12> logged_replay_px_{};  // the time line, live and pause button rectangles last logged
-  bool auto_locked_ = false;
+  bool auto_lock_ = false;                       // set in the constructor: no --lock given
+  std::array<std::string, 3> auto_locked_;       // the cells as the automatic lock last left them
+  std::array<std::string, 3> logged_locked_;     // the cells as last logged
+  std::set<std::string> first_frame_logged_;     // cameras whose first frame was logged
   std::optional<DisplayOptions> applied_display_;
   std::vector<std::unique_ptr<SceneClient>> clients_;
   // The time line's RecordedSpans call in flight (declared after clients_: destroyed first, it

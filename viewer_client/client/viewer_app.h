@@ -1,6 +1,7 @@
 #pragma once
 // The viewer application: connects to the server, renders the quad view (a free browse view plus
 // three views locked to chosen cameras, AVE §8) in a window or headless, and writes snapshots.
+#include <array>
 #include <optional>
 #include <string>
 #include <vector>
@@ -70,6 +71,11 @@ View BrowseView(const Viewport& viewport, const Eigen::Vector3d& eye, const Eige
 // The quad layout: browse view top-left, then views locked to `locked` (ids of projectors).
 std::vector<View> QuadViews(int width, int height, const View& browse, const std::vector<Projector>& projectors,
                             const std::vector<std::string>& locked);
+// The locked views' cameras while the operator has not chosen them (no --lock, no lock button
+// pressed): a cell showing a camera keeps it, and an empty cell takes the first camera by id that no
+// other cell shows. A viewer started before every camera has reported so fills its cells as the
+// cameras come, instead of leaving plan views for good. `camera_ids`: sorted by id.
+std::array<std::string, 3> FillLockedViews(std::array<std::string, 3> locked, const std::vector<std::string>& camera_ids);
 // The frusta the server should select cameras by: every view's clip-from-local matrix.
 SelectionViews SelectionOf(const std::vector<View>& views);
 // Every LiDAR's newest sweep of people points in one cloud for Renderer::SetPointCloud, coloured by

@@ -350,6 +350,24 @@ TEST(LidarPointLayer, EveryLidarsPointsColouredByTrackGreyWhenUnassigned) {
   EXPECT_TRUE(LidarPointsByTrack({}).positions_local_m.empty());
 }
 
+// A viewer that opened while only some cameras had reported (CI stop 40: the third cell stayed a
+// plan view that moved with the browse view) fills its cells as the cameras come.
+TEST(LockedViews, EmptyCellsTakeTheNextCamerasByIdAsTheyReport) {
+  using Cells = std::array<std::string, 3>;
+  Cells cells = FillLockedViews({}, {});
+  EXPECT_EQ(cells, Cells({"", "", ""}));
+  cells = FillLockedViews(cells, {"cam1", "cam3"});
+  EXPECT_EQ(cells, Cells({"cam1", "cam3", ""})) << "two cameras so far: the third cell waits";
+  // A camera earlier by id reports later: the filled cells keep theirs (no view jumps under the
+  // operator), the empty one takes it.
+  cells = FillLockedViews(cells, {"backpack", "cam1", "cam2", "cam3"});
+  EXPECT_EQ(cells, Cells({"cam1", "cam3", "backpack"}));
+  EXPECT_EQ(FillLockedViews(cells, {"backpack", "cam1", "cam2", "cam3", "cam4"}), cells) << "full cells stay";
+  // An operator who emptied the middle cell: the next camera not shown elsewhere goes in.
+  EXPECT_EQ(FillLockedViews({"cam2", "", "backpack"}, {"backpack", "cam1", "cam2"}), Cells({"cam2", "cam1", "backpack"}));
+  EXPECT_EQ(FillLockedViews({"", "", ""}, {"a", "b", "c", "d"}), Cells({"a", "b", "c"}));
+}
+
 TEST(ViewerOptions, CheckNamesTheProblem) {
   ViewerOptions o;
   EXPECT_EQ(o.Check(), "");
