@@ -58,9 +58,11 @@ VisionTracker::Impl::Relocation VisionTracker::Impl::Relocalize(PoseEkf& ekf, co
   double extent = options.relocalize_extent_m, grid_step = options.relocalize_step_m;
   if (options.relocalize_extent_sigmas > 0) {
     const Eigen::Matrix3d p = ekf.covariance().block<3, 3>(kPos, kPos);
-    const double sigma = std::sqrt(std::max(0.0, 0.5 * (p(0, 0) + p(1, 1))));
-    const double wanted = std::min(options.relocalize_max_extent_m, options.relocalize_extent_sigmas * sigma);
-    if (std::isfinite(wanted) && wanted > extent) extent = wanted, grid_step = std::max(grid_step, extent / 6);
+    // A NaN variance (a broken filter) keeps the fixed grid: `var > 0` is false for it, where
+    // std::min(max, NaN) would have returned the widest grid.
+    const double var = 0.5 * (p(0, 0) + p(1, 1));
+    const double wanted = var > 0 ? std::min(options.relocalize_max_extent_m, options.relocalize_extent_sigmas * std::sqrt(var)) : 0.0;
+    if (wanted > extent) extent = wanted, grid_step = std::max(grid_step, extent / 6);
   }
   const int n = static_cast<int>(std::floor(extent / grid_step + 1e-9));
   for (int i = -n; i <= n; ++i) {
