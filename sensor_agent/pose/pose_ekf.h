@@ -63,6 +63,20 @@ struct PoseFilterOptions {
   // beside a wall): the GPS + inertial row's NEES in band 54 -> 63 %, the vision rows unchanged to
   // slightly better (mean NEES 7.1 -> 6.9; docs/BENCHMARKS.md, "Issue 19, evening").
   double gps_bias_sigma_m = 0.5;
+  // GPS re-anchoring (issue 19, twenty-first session): when every fix for this long (and at least
+  // three) fell outside the gate, the filter is the one that is wrong, not the receiver: a vision
+  // lock on the wrong façades reports a 0.1 m sigma while metres off, and then gates out every fix
+  // that could bring it back (the campus walk started at 32 s, as the GPS returns: 6 s and 29 fixes
+  // gated while 6-15 m off, until vision declared itself lost). The next gated fix then becomes the
+  // position (PoseEkf::MovePosition, at the fix's sigma and gps_bias_sigma_m in quadrature), and
+  // the measurements that follow, vision's relocalisation included, start from there. Counted
+  // (TrackerStats::gps_reanchored). 0: off.
+  double gps_reanchor_s = 1.0;
+  double gps_reanchor_sigma_m = 3.0;  // ... the position's sigma then, at least (multipath beside walls reaches metres)
+  // ... counting only fixes this far from the filter's position: multipath beside a wall puts
+  // fixes 1.5-3.7 m off a right pose (the walk at 80-86 s: 1.6 m, gated; re-anchoring there made the
+  // walk's p95 2.4 -> 4.9 px), so a disagreement is the filter's only beyond what it can explain.
+  double gps_reanchor_min_m = 5.0;
   double orientation_sigma_deg = 2.0;   // AHRS orientation sigma (AVE §5: 1-3°); its tilt's when heading_sigma_deg is set
   // The AHRS heading's sigma (about the world's vertical), apart from its tilt's (issue 19,
   // eighteenth session). A magnetometer's heading beside steel and wiring is off by tens of
@@ -166,6 +180,9 @@ class PoseEkf {
                   bool position_from_gps_fix = false, double heading_sigma_rad = 0);
   bool initialized() const { return initialized_; }
   int64_t time_ns() const { return t_ns_; }
+  // How many times MovePosition replaced the position: a user of the filter that sees the count
+  // change under it (vision, after a GPS re-anchor) knows its picture of where the camera is went.
+  int64_t position_moves() const { return position_moves_; }
 
   // Moves the state to t_ns (constant-velocity model). Rejected (state unchanged) when t_ns is
   // before the filter's time; dt = 0 is a no-op.
@@ -314,6 +331,7 @@ class PoseEkf {
   PoseFilterOptions options_;
   bool initialized_ = false;
   int64_t t_ns_ = 0;
+  int64_t position_moves_ = 0;
   Eigen::Vector3d p_ = Eigen::Vector3d::Zero(), v_ = Eigen::Vector3d::Zero(), w_ = Eigen::Vector3d::Zero(), b_ = Eigen::Vector3d::Zero();
   Eigen::Quaterniond q_ = Eigen::Quaterniond::Identity();
   StateMatrix P_ = StateMatrix::Identity();

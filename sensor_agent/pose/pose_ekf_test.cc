@@ -449,6 +449,12 @@ TEST(PoseFilterOptions, CheckNamesTheBadField) {
   o = PoseFilterOptions();
   o.gravity_window_s = std::numeric_limits<double>::quiet_NaN();
   EXPECT_THAT(o.Check(), ::testing::HasSubstr("gravity_window_s"));
+  o = PoseFilterOptions();
+  o.gps_reanchor_s = -1;
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("gps_reanchor_s"));
+  o = PoseFilterOptions();
+  o.gps_reanchor_min_m = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THAT(o.Check(), ::testing::HasSubstr("gps_reanchor_min_m"));
 }
 
 }  // namespace

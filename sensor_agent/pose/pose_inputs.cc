@@ -206,6 +206,20 @@ void PoseTracker::Apply(const GpsReading& g) {
   last_valid_gps_ns_ = g.t_ns;
   stats_.gps_used += r.accepted();
   stats_.gps_gated += r.rejection == Rejection::kGate;
+  const bool far_off = (g.position_m - ekf_.world_from_camera().translation).norm() >= o.gps_reanchor_min_m;
+  if (r.rejection != Rejection::kGate || !far_off) {
+    gated_in_row_ = 0;
+  } else {
+    if (gated_in_row_++ == 0) gated_since_ns_ = g.t_ns;
+    if (o.gps_reanchor_s > 0 && gated_in_row_ >= 3 && static_cast<double>(g.t_ns - gated_since_ns_) * 1e-9 >= o.gps_reanchor_s) {
+      // Every fix for gps_reanchor_s disagreed: the filter is off, not the receiver. The fix
+      // becomes the position at its own sigma and the multipath the fixes share.
+      const double sigma = std::max(o.gps_reanchor_sigma_m, std::sqrt(covariance.diagonal().maxCoeff() + o.gps_bias_sigma_m * o.gps_bias_sigma_m));
+      ekf_.MovePosition(g.position_m, sigma);
+      ++stats_.gps_reanchored;
+      gated_in_row_ = 0;
+    }
+  }
   stats_.not_finite += r.rejection == Rejection::kNotFinite;
 }
 

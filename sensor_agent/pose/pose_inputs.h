@@ -66,6 +66,7 @@ struct PoseSample {
 
 struct TrackerStats {
   int64_t gps_used = 0, gps_dropouts = 0, gps_gated = 0;
+  int64_t gps_reanchored = 0;  // the position taken from a fix after gps_reanchor_s of gated fixes
   int64_t imu_used = 0, imu_gated = 0;
   int64_t gravity_used = 0, gravity_gated = 0;  // accelerometer windows applied / outside the gate
   int64_t gravity_moving = 0;                   // windows skipped: the carrier sped up or turned
@@ -100,6 +101,8 @@ class PoseTracker {
   size_t next_gps_ = 0, next_imu_ = 0;
   int64_t last_gps_ns_ = INT64_MIN, last_imu_ns_ = INT64_MIN;
   int64_t last_valid_gps_ns_ = INT64_MIN;  // the last fix applied (PoseFilterOptions::gps_correlation_s)
+  int64_t gated_since_ns_ = INT64_MIN;     // the first of the fixes gated in a row (gps_reanchor_s)
+  int gated_in_row_ = 0;
   std::optional<GpsReading> first_fix_;
   std::optional<ImuReading> first_orientation_;
   // The accelerometer window being summed (PoseFilterOptions::gravity_window_s).

@@ -98,6 +98,68 @@ TEST(PoseTracker, RejectsRepeatedAndBackwardsTimeStampsAndGatesA50MetreOutlier) 
   EXPECT_EQ(tracker.stats().time_rejected, 3);
 }
 
+// Issue 19, twenty-first session: a filter that something else (a vision lock on the wrong
+// façades) holds 15 m off at a 0.1 m sigma gates out every GPS fix that could bring it back. After
+// gps_reanchor_s of fixes all gated, the next one becomes the position; a single outlier is still
+// only gated, and with the option off the filter stays off.
+TEST(PoseTracker, FixesGatedForASecondReanchorTheFilterAnOutlierDoesNot) {
+  for (const double reanchor_s : {1.0, 0.0}) {
+    PoseFilterOptions options;
+    options.gps_reanchor_s = reanchor_s;
+    SensorLog log = WalkLog(8);
+    log.gps[10].position_m.x() += 50;  // one outlier at 2 s: gated, never a re-anchor
+    PoseTracker tracker(std::move(log), options);
+    double error_at_5s = 0, error_end = 0;
+    int64_t reanchored_by_4s = -1;
+    for (int64_t f = 0; f <= 8 * 30; ++f) {
+      const int64_t t = f * kSecond / 30;
+      tracker.Advance(t);
+      // From 3 to 4 s a wrong vision lock (here: the test) holds the filter 15 m off at 0.1 m.
+      if (f == 3 * 30) {
+        tracker.filter().MovePosition(Walk(3).translation + Eigen::Vector3d(15, 0, 0), 0.1);
+        ASSERT_EQ(tracker.stats().gps_reanchored, 0) << "the outlier alone re-anchored";
+      } else if (f > 3 * 30 && f <= 4 * 30) {
+        tracker.filter().UpdatePosition(Walk(t * 1e-9).translation + Eigen::Vector3d(15, 0, 0), Eigen::Matrix3d::Identity() * 0.01);
+      }
+      if (f == 4 * 30) reanchored_by_4s = tracker.stats().gps_reanchored;
+      const double error = (tracker.Current().world_from_camera.translation - Walk(t * 1e-9).translation).norm();
+      if (f == 5 * 30) error_at_5s = error;
+      error_end = error;
+    }
+    EXPECT_GE(tracker.stats().gps_gated, 6) << "re-anchor " << reanchor_s;
+    EXPECT_TRUE(std::isfinite(error_end));
+    if (reanchor_s > 0) {
+      EXPECT_EQ(reanchored_by_4s, 0) << "a re-anchor before a second of gated fixes";
+      EXPECT_EQ(tracker.stats().gps_reanchored, 1);
+      EXPECT_LT(error_at_5s, 0.5);
+      EXPECT_LT(error_end, 0.3);
+    } else {
+      EXPECT_EQ(tracker.stats().gps_reanchored, 0);
+      EXPECT_GT(error_at_5s, 5.0) << "the filter came back as fast without re-anchoring: the test shows nothing";
+    }
+  }
+}
+
+// ... but fixes 2.5 m off a right pose (multipath beside a wall, the walk at 80-86 s) are gated for
+// as long as it lasts without moving the pose to them (gps_reanchor_min_m).
+TEST(PoseTracker, MultipathGatedForSecondsDoesNotReanchorARightPose) {
+  SensorLog log = WalkLog(8);
+  for (GpsReading& g : log.gps)
+    if (g.t_ns >= 3 * kSecond) g.position_m.y() += 2.5;
+  PoseTracker tracker(std::move(log));
+  double worst_m = 0;
+  for (int64_t f = 0; f <= 8 * 30; ++f) {
+    const int64_t t = f * kSecond / 30;
+    tracker.Advance(t);
+    // Vision holds the pose to within centimetres from 2 s on.
+    if (f >= 2 * 30) tracker.filter().UpdatePosition(Walk(t * 1e-9).translation, Eigen::Matrix3d::Identity() * 0.05 * 0.05);
+    worst_m = std::max(worst_m, (tracker.Current().world_from_camera.translation - Walk(t * 1e-9).translation).norm());
+  }
+  EXPECT_GE(tracker.stats().gps_gated, 10) << "the offset fixes should be gated against the held pose";
+  EXPECT_EQ(tracker.stats().gps_reanchored, 0);
+  EXPECT_LT(worst_m, 0.5);
+}
+
 // Issue 19, session pose19e: multipath is a slowly varying GPS offset, not white noise. A walker's
 // fixes all 1 m off to the east (a multipath offset near a building, reported as 5 cm) for 10 s:
 // taken as white, the fixes average the offset "away" and the filter ends confident of the wrong

@@ -272,6 +272,14 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
     ekf.InflatePose(m.options.acquisition_position_sigma_m, m.options.acquisition_orientation_sigma_deg * 3.14159265358979323846 / 180);
     m.acquired = true;
   }
+  if (ekf.position_moves() != m.position_moves) {
+    // Something else moved the position since the last frame (a GPS re-anchor,
+    // PoseFilterOptions::gps_reanchor_s): the lock and the tracks belong to the old one.
+    m.relocalize = true;
+    m.locked_once = false;
+    m.ever_locked = false;  // the wrong lock's heading is in doubt too: searched again
+    m.good_full_matches = m.bad_full_matches = 0;
+  }
   Impl::Frame f(width, height, m.options.max_features);
   const cv::Mat image(height, width, CV_8UC3, const_cast<uint8_t*>(bgr));
   cv::cvtColor(image, f.gray, cv::COLOR_BGR2GRAY);
@@ -291,6 +299,7 @@ VisionFrameStats VisionTracker::Update(const uint8_t* bgr, int width, int height
   m.ReportNisScale(ekf, f);
   m.ConsiderFeatureBias(ekf, f);
   for (int s = 0; s < kVisionStageCount; ++s) (s == kStageEkf || s == kStageUnknown ? f.stats.update_ms : f.stats.detect_ms) += f.stats.stage_ms[s];
+  m.position_moves = ekf.position_moves();
   return std::move(f.stats);
 }
 

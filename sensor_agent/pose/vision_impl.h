@@ -135,6 +135,7 @@ struct VisionTracker::Impl {
   std::vector<int> known_lines;     // line features matched on the last keyframe, followed by edge search
   int frames_since_keyframe = 0;
   bool acquired = false;       // the first vision frame has widened the GPS + AHRS prior (acquisition_*)
+  int64_t position_moves = 0;  // PoseEkf::position_moves() after the last frame: a change is a move from outside
   bool relocalize = true;      // the next keyframe searches positions around the filter's (first frame, lost)
   int relocalize_thin_outlines = 0;  // this frame's relocalisation positions refused for their thin outline (VisionFrameStats)
   int relocalize_wait = 0;     // frames before a waiting relocalisation searches again (relocalize_retry_frames)

@@ -72,6 +72,9 @@ struct PoseBenchOptions {
   double tracked_sigma_px = pose::VisionOptions{}.tracked_sigma_px;
   double tracked_max_innovation_px = pose::VisionOptions{}.tracked_max_innovation_px;
   double gps_bias_sigma_m = pose::PoseFilterOptions{}.gps_bias_sigma_m;  // issue 19: multipath as a consider bias
+  double gps_reanchor_s = pose::PoseFilterOptions{}.gps_reanchor_s;      // issue 19, twenty-first session
+  double gps_reanchor_sigma_m = pose::PoseFilterOptions{}.gps_reanchor_sigma_m;
+  double gps_reanchor_min_m = pose::PoseFilterOptions{}.gps_reanchor_min_m;
   int seed = 0;  // added to the scenario's seed: another draw of every noise (GPS, IMU, camera)
   int seeds = 1;  // > 1: Monte Carlo over seeds seed .. seed + seeds - 1 (RunPoseSeeds)
   double start_s = 0;         // scene time of the first frame (the filter runs GPS + inertial from 0)
@@ -595,6 +598,9 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     fo.gate_chi2_2dof = o.gate_chi2_2dof;
     fo.pixel_sigma_px = o.pixel_sigma_px;
     fo.gps_bias_sigma_m = o.gps_bias_sigma_m;
+    fo.gps_reanchor_s = o.gps_reanchor_s;
+    fo.gps_reanchor_sigma_m = o.gps_reanchor_sigma_m;
+    fo.gps_reanchor_min_m = o.gps_reanchor_min_m;
     fo.gyro_sigma_rad_s = o.gyro_sigma_rad_s;
     fo.estimate_gyro_bias = o.gyro_bias;
     fo.gyro_bias_sigma_rad_s = o.gyro_bias_sigma_rad_s;
@@ -602,6 +608,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     fo.angular_accel_noise_rad_s2 = o.angular_accel_noise_rad_s2;
     if (run.filter_tweak) run.filter_tweak(fo);
     pose::PoseTracker tracker(log, fo);
+    int64_t gps_reanchored = 0;
     pose::VisionOptions vo;
     vo.max_features = run.features;
     vo.acquiring_sigma_px = o.acquiring_sigma_px;
@@ -789,6 +796,12 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
       }
       ++row.frames;
       row.frame_ms.push_back(frame_ms);
+      if (tracker.stats().gps_reanchored != gps_reanchored) {  // rare: the filter had gated the GPS out for a second
+        gps_reanchored = tracker.stats().gps_reanchored;
+        std::fprintf(stderr, "%s t=%.2f s: re-anchored to the GPS (%lld fixes gated so far), now %.1f m from the truth\n", run.key.c_str(),
+                     o.start_s + t_s, static_cast<long long>(tracker.stats().gps_gated),
+                     (tracker.filter().world_from_camera().translation - frame_truth.translation).norm());
+      }
       const pose::PoseSample current = tracker.Current();
       Misregistration(k, frame_truth, current.world_from_camera, seen, row.errors_px, &row.frame_median_px);
       row.frame_t_s.push_back(t_s);
@@ -1432,6 +1445,10 @@ Runner AddPoseBench(CLI::App& sub) {
       ->capture_default_str();
   sub.add_option("--carrier-height-sigma", o->carrier_height_sigma_m, "its sigma in m (VisionOptions::carrier_height_sigma_m)")->capture_default_str();
   sub.add_option("--carrier-height-correlation", o->carrier_height_correlation_s, "seconds over which its error is correlated")->capture_default_str();
+  sub.add_option("--gps-reanchor", o->gps_reanchor_s,
+                 "seconds of GPS fixes all outside the gate after which a fix becomes the position (PoseFilterOptions::gps_reanchor_s; 0: off)");
+  sub.add_option("--gps-reanchor-sigma", o->gps_reanchor_sigma_m, "the re-anchored position's sigma at least, m (PoseFilterOptions::gps_reanchor_sigma_m)");
+  sub.add_option("--gps-reanchor-min", o->gps_reanchor_min_m, "... counting only fixes this far from the filter, m (PoseFilterOptions::gps_reanchor_min_m)");
   sub.add_option("--gps-bias-sigma", o->gps_bias_sigma_m, "GPS multipath as a persisting bias of every fix, sigma per axis in m, a consider term (0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 100.0));
