@@ -58,8 +58,9 @@ std::string PoseFilterOptions::Check() const {
     return "gyro_bias_random_walk_rad_s_sqrt_s must be finite and >= 0";
   }
   if (!(std::isfinite(gps_reanchor_s) && gps_reanchor_s >= 0)) return "gps_reanchor_s must be finite and >= 0";
-  if (!(std::isfinite(gps_reanchor_sigma_m) && gps_reanchor_sigma_m >= 0) || !(std::isfinite(gps_reanchor_min_m) && gps_reanchor_min_m >= 0))
-    return "gps_reanchor_sigma_m and gps_reanchor_min_m must be finite and >= 0";
+  if (!(std::isfinite(gps_reanchor_sigma_m) && gps_reanchor_sigma_m >= 0) || !(std::isfinite(gps_reanchor_min_m) && gps_reanchor_min_m >= 0) ||
+      !(std::isfinite(gps_reanchor_orientation_sigma_deg) && gps_reanchor_orientation_sigma_deg >= 0))
+    return "gps_reanchor_sigma_m, gps_reanchor_min_m and gps_reanchor_orientation_sigma_deg must be finite and >= 0";
   if (!positive(pixel_sigma_px)) return "pixel_sigma_px must be finite and > 0";
   if (!positive(gate_chi2_3dof) || !positive(gate_chi2_2dof) || !positive(gate_chi2_1dof)) return "gate_chi2_* must be finite and > 0";
   if (!positive(max_predict_s)) return "max_predict_s must be finite and > 0";

@@ -77,6 +77,11 @@ struct PoseFilterOptions {
   // fixes 1.5-3.7 m off a right pose (the walk at 80-86 s: 1.6 m, gated; re-anchoring there made the
   // walk's p95 2.4 -> 4.9 px), so a disagreement is the filter's only beyond what it can explain.
   double gps_reanchor_min_m = 5.0;
+  // ... and the orientation, which the wrong lock pulled too (the 32 s start: roll 2.0, yaw 1.7 deg
+  // off), gets this much more sigma, as vision's own loss adds lost_orientation_sigma_deg: the AHRS
+  // takes the tilt back before vision searches. At 1 or 2 deg the 32 s start's search finds the
+  // camera (to 0.1 m); at 0, 3 or 5 deg it does not.
+  double gps_reanchor_orientation_sigma_deg = 1.0;
   double orientation_sigma_deg = 2.0;   // AHRS orientation sigma (AVE §5: 1-3°); its tilt's when heading_sigma_deg is set
   // The AHRS heading's sigma (about the world's vertical), apart from its tilt's (issue 19,
   // eighteenth session). A magnetometer's heading beside steel and wiring is off by tens of

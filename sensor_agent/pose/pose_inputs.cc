@@ -216,6 +216,7 @@ void PoseTracker::Apply(const GpsReading& g) {
       // becomes the position at its own sigma and the multipath the fixes share.
       const double sigma = std::max(o.gps_reanchor_sigma_m, std::sqrt(covariance.diagonal().maxCoeff() + o.gps_bias_sigma_m * o.gps_bias_sigma_m));
       ekf_.MovePosition(g.position_m, sigma);
+      ekf_.InflatePose(0, o.gps_reanchor_orientation_sigma_deg * 3.14159265358979323846 / 180);
       ++stats_.gps_reanchored;
       gated_in_row_ = 0;
     }

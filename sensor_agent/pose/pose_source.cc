@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "absl/strings/str_cat.h"
+#include "model_store/common/log.h"
 #include "sensor_agent/sim/gps_imu.h"
 #include "sensor_agent/sim/scenario.h"
 
@@ -19,8 +20,16 @@ class FusedPoseSource final : public FrameSource {
     if (!frame.ok()) return frame;
     const int64_t t_ns = static_cast<int64_t>(std::llround(frame->scene_time_s * 1e9));
     PoseSample sample = tracker_.Advance(t_ns);
+    if (tracker_.stats().gps_reanchored != reanchored_) {  // rare events a field technician reads in the log
+      reanchored_ = tracker_.stats().gps_reanchored;
+      AVE_LOG(WARNING) << "pose: every GPS fix for " << tracker_.filter().options().gps_reanchor_s << " s lay more than "
+                       << tracker_.filter().options().gps_reanchor_min_m << " m from the pose: re-anchored to the GPS at t="
+                       << frame->scene_time_s << " s";
+    }
     if (sample.valid && vision_) {
-      (void)vision_->Update(frame->bgr.data(), frame->width, frame->height, tracker_.filter());
+      const VisionFrameStats s = vision_->Update(frame->bgr.data(), frame->width, frame->height, tracker_.filter());
+      if (s.relocks > 0) AVE_LOG(WARNING) << "pose: vision lost its lock at t=" << frame->scene_time_s << " s; searching";
+      if (s.relocalized) AVE_LOG(INFO) << "pose: vision found the camera again at t=" << frame->scene_time_s << " s";
       sample = tracker_.Current();
     }
     frame->world_from_camera.reset();
@@ -43,6 +52,7 @@ class FusedPoseSource final : public FrameSource {
   PoseMode mode_;
   PoseTracker tracker_;
   std::unique_ptr<VisionTracker> vision_;
+  int64_t reanchored_ = 0;
 };
 
 }  // namespace

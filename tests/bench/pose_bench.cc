@@ -75,6 +75,7 @@ struct PoseBenchOptions {
   double gps_reanchor_s = pose::PoseFilterOptions{}.gps_reanchor_s;      // issue 19, twenty-first session
   double gps_reanchor_sigma_m = pose::PoseFilterOptions{}.gps_reanchor_sigma_m;
   double gps_reanchor_min_m = pose::PoseFilterOptions{}.gps_reanchor_min_m;
+  double gps_reanchor_orientation_sigma_deg = pose::PoseFilterOptions{}.gps_reanchor_orientation_sigma_deg;
   int seed = 0;  // added to the scenario's seed: another draw of every noise (GPS, IMU, camera)
   int seeds = 1;  // > 1: Monte Carlo over seeds seed .. seed + seeds - 1 (RunPoseSeeds)
   double start_s = 0;         // scene time of the first frame (the filter runs GPS + inertial from 0)
@@ -601,6 +602,7 @@ int RunPose(const PoseBenchOptions& o, std::map<std::string, RowFigures>* figure
     fo.gps_reanchor_s = o.gps_reanchor_s;
     fo.gps_reanchor_sigma_m = o.gps_reanchor_sigma_m;
     fo.gps_reanchor_min_m = o.gps_reanchor_min_m;
+    fo.gps_reanchor_orientation_sigma_deg = o.gps_reanchor_orientation_sigma_deg;
     fo.gyro_sigma_rad_s = o.gyro_sigma_rad_s;
     fo.estimate_gyro_bias = o.gyro_bias;
     fo.gyro_bias_sigma_rad_s = o.gyro_bias_sigma_rad_s;
@@ -1449,6 +1451,8 @@ Runner AddPoseBench(CLI::App& sub) {
                  "seconds of GPS fixes all outside the gate after which a fix becomes the position (PoseFilterOptions::gps_reanchor_s; 0: off)");
   sub.add_option("--gps-reanchor-sigma", o->gps_reanchor_sigma_m, "the re-anchored position's sigma at least, m (PoseFilterOptions::gps_reanchor_sigma_m)");
   sub.add_option("--gps-reanchor-min", o->gps_reanchor_min_m, "... counting only fixes this far from the filter, m (PoseFilterOptions::gps_reanchor_min_m)");
+  sub.add_option("--gps-reanchor-rot", o->gps_reanchor_orientation_sigma_deg,
+                 "... adding this orientation sigma, deg (PoseFilterOptions::gps_reanchor_orientation_sigma_deg)");
   sub.add_option("--gps-bias-sigma", o->gps_bias_sigma_m, "GPS multipath as a persisting bias of every fix, sigma per axis in m, a consider term (0: off)")
       ->capture_default_str()
       ->check(ave::cli::Range(0.0, 100.0));
