@@ -212,8 +212,9 @@ void PoseTracker::Apply(const GpsReading& g) {
   } else {
     if (gated_in_row_++ == 0) gated_since_ns_ = g.t_ns;
     if (o.gps_reanchor_s > 0 && gated_in_row_ >= 3 && static_cast<double>(g.t_ns - gated_since_ns_) * 1e-9 >= o.gps_reanchor_s) {
-      // Every fix for gps_reanchor_s disagreed: the filter is off, not the receiver. The fix
-      // becomes the position at its own sigma and the multipath the fixes share.
+      // Every fix for gps_reanchor_s disagreed by more than gps_reanchor_min_m: the filter is off,
+      // not the receiver. The fix becomes the position, at gps_reanchor_sigma_m at least (its own
+      // sigma and the multipath the fixes share, when larger), and the orientation is widened.
       const double sigma = std::max(o.gps_reanchor_sigma_m, std::sqrt(covariance.diagonal().maxCoeff() + o.gps_bias_sigma_m * o.gps_bias_sigma_m));
       ekf_.MovePosition(g.position_m, sigma);
       ekf_.InflatePose(0, o.gps_reanchor_orientation_sigma_deg * 3.14159265358979323846 / 180);
