@@ -984,6 +984,26 @@ TEST(VisionOptions, CheckNamesTheBadField) {
 // sigma tens of metres; the +-3 m grid then moved the pose to the best fit within its reach, 5 m
 // off. With relocalize_extent_sigmas the grid spans the prior's uncertainty (at most
 // relocalize_max_extent_m).
+// Issue 19, twenty-first session: a position moved under a locked tracker from outside (the GPS
+// re-anchor, PoseFilterOptions::gps_reanchor_s) is a loss for vision: its lock and tracks belong to
+// the old position, so its next frame searches positions around the new one.
+TEST_F(VisionTest, APositionMovedUnderALockIsSearchedAgain) {
+  const auto [frame, truth] = BackpackAt4s();
+  VisionTracker vision = CampusTracker(scenario_->world.FindCamera("backpack")->intrinsics, VisionOptions());
+  PoseEkf ekf;
+  ekf.Initialize(0, truth, 0.3, 1 * kDeg);
+  for (int i = 0; i < 20; ++i) {
+    const VisionFrameStats s = vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
+    ASSERT_FALSE(s.relocalized && i > 0) << "frame " << i << ": a held lock searched";
+  }
+  ASSERT_LT((ekf.world_from_camera().translation - truth.translation).norm(), 0.3);
+  ekf.MovePosition(truth.translation + Eigen::Vector3d(2.5, -1.5, 0), 3.0);
+  const VisionFrameStats moved = vision.Update(frame.bgr.data(), frame.width, frame.height, ekf);
+  EXPECT_TRUE(moved.keyframe);
+  EXPECT_TRUE(moved.relocalized) << "the moved position was not searched";
+  EXPECT_LT((ekf.world_from_camera().translation - truth.translation).norm(), 0.6);
+}
+
 TEST_F(VisionTest, AnUncertainPriorIsSearchedOverItsUncertainty) {
   const auto [frame, truth] = BackpackAt4s();
   for (const Eigen::Vector3d& off : {Eigen::Vector3d(6.5, -3.0, 0), Eigen::Vector3d(-4.0, -6.0, 0)}) {
